@@ -1,0 +1,363 @@
+//! The rig description: which arms and cameras a lab has, on which ROS 2 topics, at which rates.
+//!
+//! Written in TOML (see `rigs/*.toml` at the repository root). Everything the recorder subscribes
+//! to, the simulator publishes and the converter aligns comes from here.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::kinematics::RobotModel;
+
+/// A whole rig: arms, cameras, and the rate a policy runs at.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Rig {
+    /// Short name, e.g. `franka_2zed`.
+    pub name: String,
+    /// Rate (Hz) at which frames are aligned and the policy acts.
+    pub control_rate_hz: f64,
+    /// Arms, in the order their dimensions appear in state and action vectors.
+    #[serde(rename = "arm", default)]
+    pub arms: Vec<Arm>,
+    /// Cameras.
+    #[serde(rename = "camera", default)]
+    pub cameras: Vec<Camera>,
+}
+
+/// One arm and its gripper.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Arm {
+    /// Name used in feature names, e.g. `left`.
+    pub name: String,
+    /// Kinematic model.
+    pub model: RobotModel,
+    /// `sensor_msgs/JointState` topic of the arm.
+    pub joint_state_topic: String,
+    /// The arm's joints, base to tip, as named in the JointState messages.
+    pub joint_names: Vec<String>,
+    /// Rate (Hz) the driver publishes joint states at.
+    pub rate_hz: f64,
+    /// The gripper, if any.
+    pub gripper: Option<Gripper>,
+}
+
+/// Gripper hardware, which fixes how joint positions map to an opening width.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GripperModel {
+    /// Franka Hand: two prismatic fingers, each at width / 2 (m).
+    FrankaHand,
+    /// Robotiq 2F-85: one knuckle angle, 0 (open, 85 mm) to 0.8 rad (closed).
+    Robotiq2f85,
+}
+
+impl GripperModel {
+    /// Opening width (m) from the gripper's joint positions (in `joint_names` order).
+    pub fn width_m(self, positions: &[f64]) -> f64 {
+        match self {
+            Self::FrankaHand => positions.iter().sum(),
+            Self::Robotiq2f85 => 0.085 * (1.0 - positions.first().copied().unwrap_or(0.0) / 0.8),
+        }
+    }
+    /// Joint positions giving an opening width (m), inverse of [`Self::width_m`].
+    pub fn positions_for_width(self, width_m: f64, joints: usize) -> Vec<f64> {
+        match self {
+            Self::FrankaHand => vec![width_m / joints.max(1) as f64; joints],
+            Self::Robotiq2f85 => vec![0.8 * (1.0 - width_m / 0.085); joints],
+        }
+    }
+    /// Widest opening (m).
+    pub fn max_width_m(self) -> f64 {
+        match self {
+            Self::FrankaHand => 0.08,
+            Self::Robotiq2f85 => 0.085,
+        }
+    }
+}
+
+/// A gripper and the topic its joint states arrive on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Gripper {
+    /// Hardware model.
+    pub model: GripperModel,
+    /// `sensor_msgs/JointState` topic.
+    pub topic: String,
+    /// Finger joints as named in the messages.
+    pub joint_names: Vec<String>,
+    /// Publish rate (Hz).
+    pub rate_hz: f64,
+}
+
+/// Camera hardware, which fixes the raw encoding its ROS 2 wrapper publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraModel {
+    /// Stereolabs ZED (zed-ros2-wrapper): `bgra8`.
+    Zed,
+    /// Intel RealSense (realsense-ros): `rgb8`.
+    Realsense,
+}
+
+impl CameraModel {
+    /// The encoding the vendor's ROS 2 wrapper publishes on its color topic.
+    pub fn default_encoding(self) -> &'static str {
+        match self {
+            Self::Zed => "bgra8",
+            Self::Realsense => "rgb8",
+        }
+    }
+}
+
+/// One camera.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    /// Name used in feature names, e.g. `wrist`.
+    pub name: String,
+    /// Color image topic.
+    pub topic: String,
+    /// Hardware model.
+    pub model: CameraModel,
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Frame rate (Hz).
+    pub fps: f64,
+    /// Pixel encoding; the model's default when absent.
+    pub encoding: Option<String>,
+    /// True when the topic carries `sensor_msgs/CompressedImage`.
+    #[serde(default)]
+    pub compressed: bool,
+}
+
+impl Camera {
+    /// The encoding of this camera's raw images.
+    pub fn encoding(&self) -> &str {
+        self.encoding
+            .as_deref()
+            .unwrap_or(self.model.default_encoding())
+    }
+    /// The ROS 2 message type on the topic.
+    pub fn message_type(&self) -> &'static str {
+        if self.compressed {
+            "sensor_msgs/msg/CompressedImage"
+        } else {
+            "sensor_msgs/msg/Image"
+        }
+    }
+}
+
+/// One topic a rig publishes, with its type and nominal rate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicSpec {
+    /// ROS 2 topic name with its leading `/`.
+    pub topic: String,
+    /// Full ROS 2 type, e.g. `sensor_msgs/msg/JointState`.
+    pub message_type: &'static str,
+    /// Nominal publish rate (Hz).
+    pub rate_hz: f64,
+    /// True for image topics (large messages).
+    pub is_image: bool,
+}
+
+const BUILTIN: &[(&str, &str)] = &[
+    ("franka_2zed", include_str!("../../rigs/franka_2zed.toml")),
+    (
+        "bimanual_ur5_3rs",
+        include_str!("../../rigs/bimanual_ur5_3rs.toml"),
+    ),
+];
+
+/// A finite rate or size above zero.
+fn positive(x: f64) -> bool {
+    x.is_finite() && x > 0.0
+}
+
+impl Rig {
+    /// Reads and validates a rig file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Rig {
+            path: path.into(),
+            reason: e.to_string(),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates rig TOML; `path` only names the source in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let err = |reason: String| Error::Rig {
+            path: path.into(),
+            reason,
+        };
+        let rig: Rig = toml::from_str(text).map_err(|e| err(e.message().to_string()))?;
+        rig.validate().map_err(err)?;
+        Ok(rig)
+    }
+
+    /// The rigs shipped in `rigs/`, by name: `franka_2zed`, `bimanual_ur5_3rs`.
+    pub fn builtin(name: &str) -> Option<Self> {
+        let (_, text) = BUILTIN.iter().find(|(n, _)| *n == name)?;
+        Self::parse(text, &PathBuf::from(format!("rigs/{name}.toml"))).ok()
+    }
+
+    /// Names of the shipped rigs.
+    pub fn builtin_names() -> impl Iterator<Item = &'static str> {
+        BUILTIN.iter().map(|(n, _)| *n)
+    }
+
+    /// A rig file path, or the name of a shipped rig.
+    pub fn load_or_builtin(path_or_name: &str) -> Result<Self> {
+        let path = Path::new(path_or_name);
+        if !path.exists() {
+            if let Some(rig) = Self::builtin(path_or_name) {
+                return Ok(rig);
+            }
+        }
+        Self::load(path)
+    }
+
+    /// Every topic of the rig, cameras first, sorted within each kind as declared.
+    pub fn topics(&self) -> Vec<TopicSpec> {
+        let mut out: Vec<TopicSpec> = self
+            .cameras
+            .iter()
+            .map(|c| TopicSpec {
+                topic: c.topic.clone(),
+                message_type: c.message_type(),
+                rate_hz: c.fps,
+                is_image: true,
+            })
+            .collect();
+        for arm in &self.arms {
+            out.push(TopicSpec {
+                topic: arm.joint_state_topic.clone(),
+                message_type: "sensor_msgs/msg/JointState",
+                rate_hz: arm.rate_hz,
+                is_image: false,
+            });
+            if let Some(g) = &arm.gripper {
+                out.push(TopicSpec {
+                    topic: g.topic.clone(),
+                    message_type: "sensor_msgs/msg/JointState",
+                    rate_hz: g.rate_hz,
+                    is_image: false,
+                });
+            }
+        }
+        out
+    }
+
+    fn validate(&self) -> std::result::Result<(), String> {
+        if !positive(self.control_rate_hz) {
+            return Err(format!(
+                "control_rate_hz must be > 0, got {}",
+                self.control_rate_hz
+            ));
+        }
+        if self.arms.is_empty() && self.cameras.is_empty() {
+            return Err("a rig needs at least one [[arm]] or [[camera]]".into());
+        }
+        let mut names = Vec::new();
+        for arm in &self.arms {
+            let dof = arm.model.dof();
+            if arm.joint_names.len() != dof {
+                return Err(format!(
+                    "arm '{}': model {} has {dof} joints, joint_names lists {}",
+                    arm.name,
+                    arm.model,
+                    arm.joint_names.len()
+                ));
+            }
+            if !positive(arm.rate_hz) {
+                return Err(format!("arm '{}': rate_hz must be > 0", arm.name));
+            }
+            if let Some(g) = &arm.gripper {
+                if g.joint_names.is_empty() || !positive(g.rate_hz) {
+                    return Err(format!(
+                        "arm '{}': gripper needs joint_names and rate_hz > 0",
+                        arm.name
+                    ));
+                }
+            }
+            names.push(("arm", arm.name.as_str()));
+        }
+        for cam in &self.cameras {
+            if cam.width == 0 || cam.height == 0 || !positive(cam.fps) {
+                return Err(format!(
+                    "camera '{}': width, height and fps must be > 0",
+                    cam.name
+                ));
+            }
+            names.push(("camera", cam.name.as_str()));
+        }
+        for (i, (kind, name)) in names.iter().enumerate() {
+            if name.is_empty() || names[..i].iter().any(|(k, n)| k == kind && n == name) {
+                return Err(format!("{kind} name '{name}' is empty or used twice"));
+            }
+        }
+        let topics = self.topics();
+        for (i, t) in topics.iter().enumerate() {
+            if !t.topic.starts_with('/') || t.topic.ends_with('/') || t.topic.contains("//") {
+                return Err(format!(
+                    "topic '{}' must be absolute, like /ns/name",
+                    t.topic
+                ));
+            }
+            if topics[..i].iter().any(|o| o.topic == t.topic) {
+                return Err(format!("topic '{}' is used twice", t.topic));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_rigs_parse() {
+        for name in Rig::builtin_names() {
+            let rig = Rig::builtin(name).unwrap_or_else(|| panic!("{name} must parse"));
+            assert!(!rig.topics().is_empty());
+        }
+        let franka = Rig::builtin("franka_2zed").unwrap();
+        assert_eq!(franka.cameras.len(), 2);
+        assert_eq!(franka.cameras[0].encoding(), "bgra8");
+        let ur = Rig::builtin("bimanual_ur5_3rs").unwrap();
+        assert_eq!((ur.arms.len(), ur.cameras.len()), (2, 3));
+        assert_eq!(ur.cameras[0].encoding(), "rgb8");
+    }
+
+    #[test]
+    fn errors_name_the_file_and_the_problem() {
+        let text = include_str!("../../rigs/franka_2zed.toml").replace("\"fr3_joint7\"", "");
+        let e = Rig::parse(&text, Path::new("my_rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("my_rig.toml: arm 'arm': model fr3 has 7 joints"),
+            "{e}"
+        );
+        let e = Rig::parse("name = 3", Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("x.toml: "), "{e}");
+    }
+
+    #[test]
+    fn gripper_width_round_trips() {
+        for m in [GripperModel::FrankaHand, GripperModel::Robotiq2f85] {
+            let q = m.positions_for_width(0.05, 2);
+            assert!(
+                (m.width_m(&q[..if m == GripperModel::FrankaHand { 2 } else { 1 }]) - 0.05).abs()
+                    < 1e-12
+            );
+        }
+    }
+}
