@@ -60,9 +60,11 @@ impl FromStr for Command {
             "failure" | "fail" => Self::Stop(Outcome::Failure),
             "discard" => Self::Stop(Outcome::Discarded),
             "quit" => Self::Quit,
-            other => return Err(format!(
+            other => {
+                return Err(format!(
                 "unknown command '{other}' (start, stop, toggle, success, failure, discard, quit)"
-            )),
+            ))
+            }
         })
     }
 }

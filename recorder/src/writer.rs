@@ -254,7 +254,8 @@ impl WriterThread {
                 tracing::info!(index, %outcome, path = %summary.path.display(), "episode finished");
                 self.publish_status(&serde_json::json!({
                     "event": "finished", "episode": index, "outcome": outcome.as_str(),
-                    "path": summary.path.display().to_string(), "messages": counts, "dropped": dropped,
+                    "path": summary.path.display().to_string(), "messages": counts, "bytes": summary.bytes,
+                    "dropped": dropped, "upstream_gaps": gaps,
                 }));
                 let report = EpisodeReport {
                     index,

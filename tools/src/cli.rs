@@ -1,0 +1,212 @@
+//! Every flag of `scaledp`, in one place.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// How a command ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitStatus {
+    /// 0: everything worked.
+    Success,
+    /// 1: the command failed.
+    Error,
+    /// 3: the command finished, but some data was lost (drops, failed episodes).
+    DataLost,
+}
+
+impl From<ExitStatus> for std::process::ExitCode {
+    fn from(s: ExitStatus) -> Self {
+        Self::from(match s {
+            ExitStatus::Success => 0,
+            ExitStatus::Error => 1,
+            ExitStatus::DataLost => 3,
+        })
+    }
+}
+
+/// scaledp: record teleoperated demonstrations and turn them into training data for ScaleDP.
+#[derive(Debug, Parser)]
+#[command(name = "scaledp", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+    /// More log output (-v debug, -vv trace); RUST_LOG overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    /// Only warnings and errors on stderr.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run a simulated rig that publishes cameras and joint states over Zenoh like a real one.
+    Sim(SimArgs),
+    /// Record teleop episodes from Zenoh into one MCAP file each.
+    Record(RecordArgs),
+    /// Repair an MCAP file cut short by a crash, keeping every complete chunk.
+    Recover(RecoverArgs),
+    /// Measure throughput and cost.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Simulated rig + recorder on loopback: records a few short episodes and summarizes them.
+    Demo(DemoArgs),
+}
+
+/// Where the Zenoh session connects and listens.
+#[derive(Debug, Clone, Args)]
+pub struct NetArgs {
+    /// A standard Zenoh config file (json5): mode, endpoints, TLS, scouting…
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
+    /// Endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable; overrides the file).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Endpoint to listen on (repeatable; overrides the file).
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+}
+
+/// Key layout of the simulated publishers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum KeysArg {
+    /// zenoh-bridge-ros2dds: the topic without its leading '/'.
+    Bridge,
+    /// rmw_zenoh: <domain>/<topic>/<type>/<hash>, with attachments.
+    Rmw,
+}
+
+/// `scaledp sim`.
+#[derive(Debug, Args)]
+pub struct SimArgs {
+    /// Rig file, or the name of a shipped rig (franka_2zed, bimanual_ur5_3rs).
+    #[arg(long, default_value = "franka_2zed")]
+    pub rig: String,
+    /// Seed of the trajectories, jitter and latencies.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stop after this many seconds (default: until Ctrl-C).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+    /// Key layout.
+    #[arg(long, value_enum, default_value = "bridge")]
+    pub keys: KeysArg,
+    /// Bridge namespace prefix for the keys.
+    #[arg(long, default_value = "")]
+    pub namespace: String,
+    /// Network settings; by default the sim listens on tcp/127.0.0.1:7447 like the bridge.
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+/// Chunk compression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CompressionArg {
+    /// No compression.
+    None,
+    /// LZ4 (fast).
+    Lz4,
+    /// Zstandard level 1 (smaller).
+    Zstd,
+}
+
+/// `scaledp record`.
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    /// Rig file, or the name of a shipped rig.
+    #[arg(long)]
+    pub rig: String,
+    /// Directory for episode_NNNNNN.mcap files (numbering continues after existing ones).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The task instruction stored with each episode.
+    #[arg(long)]
+    pub task: String,
+    /// Who teleoperates (default: $USER).
+    #[arg(long)]
+    pub operator: Option<String>,
+    /// Record this many episodes, then exit.
+    #[arg(long)]
+    pub episodes: Option<u64>,
+    /// Stop each episode after this many seconds (unattended runs).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+    /// Chunk compression.
+    #[arg(long, value_enum, default_value = "lz4")]
+    pub compression: CompressionArg,
+    /// Target chunk size (MiB).
+    #[arg(long, default_value_t = 8)]
+    pub chunk_mib: u64,
+    /// Payload bytes the writer queue may hold before dropping (MiB).
+    #[arg(long, default_value_t = 1024)]
+    pub queue_mib: usize,
+    /// Prefix of the control (<prefix>/control) and status (<prefix>/status) keys.
+    #[arg(long, default_value = "scaledp/recorder")]
+    pub control_prefix: String,
+    /// Namespace zenoh-bridge-ros2dds runs with, if any.
+    #[arg(long, default_value = "")]
+    pub namespace: String,
+    /// Seconds to wait for every topic to be live before an unattended run starts.
+    #[arg(long, default_value_t = 10.0)]
+    pub wait_topics: f64,
+    /// Never read the keyboard, even on a terminal (control over Zenoh only).
+    #[arg(long)]
+    pub no_keyboard: bool,
+    /// Network settings; by default a peer connecting to tcp/127.0.0.1:7447.
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+/// `scaledp recover`.
+#[derive(Debug, Args)]
+pub struct RecoverArgs {
+    /// The damaged file (e.g. episode_000003.mcap.partial).
+    pub input: PathBuf,
+    /// Output (default: the name without .partial, or <stem>.recovered.mcap).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+}
+
+/// `scaledp bench`.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Publish the reference load over loopback into a recorder process and report drops and CPU.
+    Record(BenchRecordArgs),
+}
+
+/// `scaledp bench record`.
+#[derive(Debug, Args)]
+pub struct BenchRecordArgs {
+    /// Seconds of load.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Chunk compression of the recorder.
+    #[arg(long, value_enum, default_value = "lz4")]
+    pub compression: CompressionArg,
+    /// Where the recording goes (default: a temporary directory, removed afterwards).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// `scaledp demo`.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Rig file, or the name of a shipped rig.
+    #[arg(long, default_value = "franka_2zed")]
+    pub rig: String,
+    /// Output directory.
+    #[arg(long, default_value = "scaledp-demo")]
+    pub out: PathBuf,
+    /// Episodes to record.
+    #[arg(long, default_value_t = 3)]
+    pub episodes: u64,
+    /// Seconds per episode.
+    #[arg(long, default_value_t = 4.0)]
+    pub duration: f64,
+    /// Seed of the simulated rig.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}

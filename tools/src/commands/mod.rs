@@ -1,0 +1,66 @@
+//! One module per subcommand; `dispatch` picks it.
+
+mod bench;
+mod demo;
+mod record;
+mod recover;
+mod sim;
+
+use anyhow::Result;
+
+use crate::cli::{Command, CompressionArg, ExitStatus, NetArgs};
+
+/// Runs one parsed command.
+pub fn dispatch(command: Command) -> Result<ExitStatus> {
+    match command {
+        Command::Sim(args) => sim::run(args),
+        Command::Record(args) => record::run(args),
+        Command::Recover(args) => recover::run(args),
+        Command::Bench(crate::cli::BenchCommand::Record(args)) => bench::record(args),
+        Command::Demo(args) => demo::run(args),
+    }
+}
+
+fn zenoh_config(net: &NetArgs, default_listen: &[String]) -> Result<zenoh::Config> {
+    let listen = if net.listen.is_empty() && net.connect.is_empty() && net.zenoh_config.is_none() {
+        default_listen
+    } else {
+        &net.listen
+    };
+    Ok(scaledp_recorder::net::zenoh_config(
+        net.zenoh_config.as_deref(),
+        &net.connect,
+        listen,
+    )?)
+}
+
+fn compression(c: CompressionArg) -> scaledp_recorder::Compression {
+    match c {
+        CompressionArg::None => scaledp_recorder::Compression::None,
+        CompressionArg::Lz4 => scaledp_recorder::Compression::Lz4,
+        CompressionArg::Zstd => scaledp_recorder::Compression::Zstd,
+    }
+}
+
+/// A flag set by Ctrl-C (SIGINT) or SIGTERM.
+fn interrupt_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Arc, OnceLock};
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let f = flag.clone();
+        if let Err(e) = ctrlc::set_handler(move || f.store(true, Ordering::Relaxed)) {
+            tracing::warn!("cannot catch Ctrl-C: {e}");
+        }
+        flag
+    })
+    .clone()
+}
+
+/// A loopback TCP port nothing listens on right now.
+fn free_port() -> Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port())
+}
