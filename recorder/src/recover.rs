@@ -54,7 +54,16 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverySummary> {
         });
     }
     let mut src = File::open(input).map_err(Error::io(input))?;
-    let tmp = crate::episode::partial_path(output);
+    // Not `<output>.partial`: for the default output that is the input itself.
+    let mut tmp = output.as_os_str().to_owned();
+    tmp.push(".recovering");
+    let tmp = PathBuf::from(tmp);
+    if tmp == input {
+        return Err(Error::Io {
+            path: input.into(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "input and scratch file are the same"),
+        });
+    }
     let options = mcap::WriteOptions::new()
         .profile("ros2")
         .library(concat!("scaledp-recover ", env!("CARGO_PKG_VERSION")))
@@ -63,7 +72,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverySummary> {
         .create(BufWriter::new(File::create(&tmp).map_err(Error::io(&tmp))?))
         .map_err(Error::mcap(&tmp))?;
     let mut reader =
-        LinearReader::new_with_options(LinearReaderOptions::default().with_skip_end_magic(true));
+        LinearReader::new_with_options(LinearReaderOptions::default().with_skip_end_magic(true).with_emit_chunks(false));
     let mut summary = RecoverySummary {
         output: output.into(),
         messages: 0,

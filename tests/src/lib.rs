@@ -1,1 +1,74 @@
-//! placeholder
+//! Helpers for scaledp's end-to-end and interop tests: the Python peers in `.venv`, the built
+//! `scaledp` binary, loopback ports, and small rigs that keep recordings tiny.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The venv Python with rosbags, mcap and mcap_ros2 (`scripts/setup-python.sh` makes it);
+/// `SCALEDP_PYTHON` overrides.
+pub fn python() -> PathBuf {
+    if let Ok(p) = std::env::var("SCALEDP_PYTHON") {
+        return p.into();
+    }
+    let p = workspace().join(".venv/bin/python");
+    assert!(p.exists(), "{} is missing: run scripts/setup-python.sh (scripts/test.sh does)", p.display());
+    p
+}
+
+/// Runs `tests/py/<script>` with `args`, returns its stdout parsed as JSON.
+pub fn run_python(script: &str, args: &[&Path]) -> serde_json::Value {
+    let out = Command::new(python())
+        .arg(workspace().join("tests/py").join(script))
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("running {script}: {e}"));
+    assert!(
+        out.status.success(),
+        "{script} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{script} printed no JSON: {e}"))
+}
+
+/// The `scaledp` binary of the profile these tests were built in (`cargo build --bins` first).
+pub fn scaledp_bin() -> PathBuf {
+    let exe = std::env::current_exe().expect("test binary path");
+    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>");
+    let bin = dir.join("scaledp");
+    assert!(bin.exists(), "{} is missing: cargo build --release --bins first", bin.display());
+    bin
+}
+
+/// A loopback TCP endpoint nothing listens on right now.
+pub fn free_endpoint() -> String {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    format!("tcp/127.0.0.1:{port}")
+}
+
+/// The Franka rig with the real topics, encodings and rates but 64×48 images.
+pub fn small_franka() -> scaledp_schema::Rig {
+    let mut rig = scaledp_schema::Rig::builtin("franka_2zed").expect("shipped rig");
+    for c in &mut rig.cameras {
+        c.width = 64;
+        c.height = 48;
+    }
+    rig
+}
+
+/// The bimanual UR5 rig (rgb8 RealSense) with 32×24 images.
+pub fn small_bimanual() -> scaledp_schema::Rig {
+    let mut rig = scaledp_schema::Rig::builtin("bimanual_ur5_3rs").expect("shipped rig");
+    for c in &mut rig.cameras {
+        c.width = 32;
+        c.height = 24;
+    }
+    rig
+}

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# The whole test suite, from a fresh clone: Python peers into .venv, then one release build
+# shared by the binaries and every test (the end-to-end tests drive target/release/scaledp).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup-python.sh
+cargo fmt --all -- --check
+cargo build --release --workspace --bins --locked
+cargo test --release --workspace --locked
