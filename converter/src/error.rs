@@ -55,7 +55,10 @@ pub enum Error {
 impl Error {
     /// An [`Error::Input`] for `path`.
     pub fn input(path: impl Into<PathBuf>, reason: impl std::fmt::Display) -> Self {
-        Self::Input { path: path.into(), reason: reason.to_string() }
+        Self::Input {
+            path: path.into(),
+            reason: reason.to_string(),
+        }
     }
     /// A closure turning an I/O error on `path` into an [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {

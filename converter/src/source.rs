@@ -63,7 +63,13 @@ pub fn ros2_type_name(name: &str) -> String {
 mod tests {
     #[test]
     fn type_names() {
-        assert_eq!(super::ros2_type_name("sensor_msgs/Image"), "sensor_msgs/msg/Image");
-        assert_eq!(super::ros2_type_name("sensor_msgs/msg/Image"), "sensor_msgs/msg/Image");
+        assert_eq!(
+            super::ros2_type_name("sensor_msgs/Image"),
+            "sensor_msgs/msg/Image"
+        );
+        assert_eq!(
+            super::ros2_type_name("sensor_msgs/msg/Image"),
+            "sensor_msgs/msg/Image"
+        );
     }
 }

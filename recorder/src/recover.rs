@@ -61,7 +61,10 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverySummary> {
     if tmp == input {
         return Err(Error::Io {
             path: input.into(),
-            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "input and scratch file are the same"),
+            source: std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "input and scratch file are the same",
+            ),
         });
     }
     let options = mcap::WriteOptions::new()
@@ -71,8 +74,11 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverySummary> {
     let mut out = options
         .create(BufWriter::new(File::create(&tmp).map_err(Error::io(&tmp))?))
         .map_err(Error::mcap(&tmp))?;
-    let mut reader =
-        LinearReader::new_with_options(LinearReaderOptions::default().with_skip_end_magic(true).with_emit_chunks(false));
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_skip_end_magic(true)
+            .with_emit_chunks(false),
+    );
     let mut summary = RecoverySummary {
         output: output.into(),
         messages: 0,

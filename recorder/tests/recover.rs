@@ -16,7 +16,10 @@ fn every_complete_chunk_survives_any_cut() {
         is_image: false,
     }];
     let meta = BTreeMap::from([("task".to_string(), "t".to_string())]);
-    let mut w = EpisodeOptions::new().chunk_size(1 << 30).create(&path, &topics, meta).unwrap();
+    let mut w = EpisodeOptions::new()
+        .chunk_size(1 << 30)
+        .create(&path, &topics, meta)
+        .unwrap();
     let partial = partial_path(&path);
     // Ten flushes of ten messages: the file size after each flush is a safe cut point.
     let mut safe = vec![];
@@ -32,7 +35,14 @@ fn every_complete_chunk_survives_any_cut() {
     }
     let full = std::fs::read(&partial).unwrap();
     assert_eq!(full.len() as u64, *safe.last().unwrap());
-    for cut in [full.len(), full.len() - 1, full.len() / 2, full.len() / 3 + 17, safe[0] as usize, 100] {
+    for cut in [
+        full.len(),
+        full.len() - 1,
+        full.len() / 2,
+        full.len() / 3 + 17,
+        safe[0] as usize,
+        100,
+    ] {
         let cut_file = dir.path().join(format!("cut_{cut}.mcap.partial"));
         std::fs::write(&cut_file, &full[..cut]).unwrap();
         let out = dir.path().join(format!("cut_{cut}.mcap"));
@@ -48,9 +58,15 @@ fn every_complete_chunk_survives_any_cut() {
         );
         // The result is a valid, finished MCAP with the messages in order.
         let bytes = std::fs::read(&out).unwrap();
-        let msgs: Vec<_> = mcap::MessageStream::new(&bytes).unwrap().map(|m| m.unwrap()).collect();
+        let msgs: Vec<_> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap())
+            .collect();
         assert_eq!(msgs.len() as u64, s.messages);
-        assert!(msgs.iter().enumerate().all(|(i, m)| m.log_time == 1_000 + i as u64));
+        assert!(msgs
+            .iter()
+            .enumerate()
+            .all(|(i, m)| m.log_time == 1_000 + i as u64));
         assert!(recover(&cut_file, &out).is_err(), "never overwrites");
     }
     drop(w);

@@ -16,7 +16,11 @@ pub fn python() -> PathBuf {
         return p.into();
     }
     let p = workspace().join(".venv/bin/python");
-    assert!(p.exists(), "{} is missing: run scripts/setup-python.sh (scripts/test.sh does)", p.display());
+    assert!(
+        p.exists(),
+        "{} is missing: run scripts/setup-python.sh (scripts/test.sh does)",
+        p.display()
+    );
     p
 }
 
@@ -38,9 +42,16 @@ pub fn run_python(script: &str, args: &[&Path]) -> serde_json::Value {
 /// The `scaledp` binary of the profile these tests were built in (`cargo build --bins` first).
 pub fn scaledp_bin() -> PathBuf {
     let exe = std::env::current_exe().expect("test binary path");
-    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>");
     let bin = dir.join("scaledp");
-    assert!(bin.exists(), "{} is missing: cargo build --release --bins first", bin.display());
+    assert!(
+        bin.exists(),
+        "{} is missing: cargo build --release --bins first",
+        bin.display()
+    );
     bin
 }
 

@@ -12,14 +12,28 @@ use scaledp_tests::{free_endpoint, run_python, scaledp_bin, small_franka};
 fn kill_9_then_recover_loses_at_most_one_second() {
     let rig = small_franka();
     let endpoint = free_endpoint();
-    let sim_session = net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap()).unwrap();
-    let sim = SimOptions::new(rig.clone()).seed(9).spawn(&sim_session).unwrap();
+    let sim_session =
+        net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap()).unwrap();
+    let sim = SimOptions::new(rig.clone())
+        .seed(9)
+        .spawn(&sim_session)
+        .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let rig_path = dir.path().join("rig.toml");
     std::fs::write(&rig_path, toml::to_string(&rig).unwrap()).unwrap();
     let out = dir.path().join("rec");
     let mut child = Command::new(scaledp_bin())
-        .args(["record", "--task", "crash test", "--duration", "60", "--no-keyboard", "-q", "--connect", &endpoint])
+        .args([
+            "record",
+            "--task",
+            "crash test",
+            "--duration",
+            "60",
+            "--no-keyboard",
+            "-q",
+            "--connect",
+            &endpoint,
+        ])
         .arg("--rig")
         .arg(&rig_path)
         .arg("--out")
@@ -31,7 +45,10 @@ fn kill_9_then_recover_loses_at_most_one_second() {
     let partial = out.join("episode_000000.mcap.partial");
     let deadline = Instant::now() + Duration::from_secs(20);
     while !partial.exists() {
-        assert!(Instant::now() < deadline, "recorder never opened an episode");
+        assert!(
+            Instant::now() < deadline,
+            "recorder never opened an episode"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     std::thread::sleep(Duration::from_millis(2500));
@@ -39,20 +56,41 @@ fn kill_9_then_recover_loses_at_most_one_second() {
     let killed_ns = now_ns();
     child.wait().unwrap();
     sim.stop();
-    assert!(partial.exists(), "the episode must still be a .partial file");
+    assert!(
+        partial.exists(),
+        "the episode must still be a .partial file"
+    );
 
-    let status = Command::new(scaledp_bin()).arg("recover").arg(&partial).status().unwrap();
-    assert!(matches!(status.code(), Some(0 | 3)), "recover exited with {status}");
+    let status = Command::new(scaledp_bin())
+        .arg("recover")
+        .arg(&partial)
+        .status()
+        .unwrap();
+    assert!(
+        matches!(status.code(), Some(0 | 3)),
+        "recover exited with {status}"
+    );
     let fixed = out.join("episode_000000.mcap");
     let py = run_python("read_mcap.py", &[&fixed]);
     assert_eq!(py["header"]["profile"], "ros2");
-    assert_eq!(py["metadata"]["scaledp.episode.start"]["task"], "crash test");
+    assert_eq!(
+        py["metadata"]["scaledp.episode.start"]["task"],
+        "crash test"
+    );
     let rosbags = py["rosbags"].as_array().unwrap();
     assert_eq!(rosbags.len(), py["mcap_ros2"].as_array().unwrap().len());
-    let last = rosbags.iter().map(|m| m["log_time"].as_u64().unwrap()).max().unwrap();
+    let last = rosbags
+        .iter()
+        .map(|m| m["log_time"].as_u64().unwrap())
+        .max()
+        .unwrap();
     let lost_s = killed_ns.saturating_sub(last) as f64 * 1e-9;
     assert!(lost_s <= 1.0, "lost the last {lost_s:.3} s (more than 1 s)");
     for topic in rig.topics() {
-        assert!(rosbags.iter().any(|m| m["topic"] == topic.topic), "{} missing", topic.topic);
+        assert!(
+            rosbags.iter().any(|m| m["topic"] == topic.topic),
+            "{} missing",
+            topic.topic
+        );
     }
 }

@@ -6,11 +6,24 @@ use std::process::Command;
 fn low_level_crates_stay_light() {
     for krate in ["scaledp-schema", "scaledp-datasets"] {
         let out = Command::new(env!("CARGO"))
-            .args(["tree", "--offline", "-e", "normal", "--prefix", "none", "-p", krate])
+            .args([
+                "tree",
+                "--offline",
+                "-e",
+                "normal",
+                "--prefix",
+                "none",
+                "-p",
+                krate,
+            ])
             .current_dir(scaledp_tests::workspace())
             .output()
             .expect("cargo tree");
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let tree = String::from_utf8_lossy(&out.stdout);
         for heavy in ["zenoh", "rerun", "mcap ", "tokio"] {
             assert!(

@@ -7,7 +7,13 @@ use scaledp_schema::{CdrWriter, RosMessage};
 use scaledp_tests::run_python;
 
 fn header() -> Header {
-    Header { stamp: Time { sec: 1_700_000_000, nanosec: 123_456_789 }, frame_id: "zed_front_camera_optical_frame".into() }
+    Header {
+        stamp: Time {
+            sec: 1_700_000_000,
+            nanosec: 123_456_789,
+        },
+        frame_id: "zed_front_camera_optical_frame".into(),
+    }
 }
 
 fn encode<M: RosMessage>(m: &M, big_endian: bool) -> Vec<u8> {
@@ -21,16 +27,26 @@ fn hex(b: &[u8]) -> String {
 }
 
 fn unhex(s: &str) -> Vec<u8> {
-    (0..s.len()).step_by(2).map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap()).collect()
+    (0..s.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&s[i..i + 2], 16).unwrap())
+        .collect()
 }
 
-fn check<M: RosMessage + PartialEq + std::fmt::Debug>(reference: &serde_json::Value, name: &str, m: M) {
+fn check<M: RosMessage + PartialEq + std::fmt::Debug>(
+    reference: &serde_json::Value,
+    name: &str,
+    m: M,
+) {
     for (order, be) in [("le", false), ("be", true)] {
         let want = reference["cdr"][name][order].as_str().unwrap();
         // rosbags pads to a multiple of 4; the padding carries nothing, compare the body.
         let ours = encode(&m, be);
         assert_eq!(hex(&ours), want[..ours.len() * 2], "{name} {order}");
-        assert!(want[ours.len() * 2..].chars().all(|c| c == '0'), "{name} {order}: trailing bytes");
+        assert!(
+            want[ours.len() * 2..].chars().all(|c| c == '0'),
+            "{name} {order}: trailing bytes"
+        );
         let back = M::from_cdr(&unhex(want)).unwrap();
         assert_eq!(back, m, "{name} {order} decode");
     }
@@ -42,10 +58,14 @@ fn definitions_and_cdr_match_rosbags() {
     let defs = reference["definitions"].as_object().unwrap();
     assert_eq!(defs.len(), 9);
     for (type_name, text) in defs {
-        let ours = scaledp_schema::msg::definition(type_name).unwrap_or_else(|| panic!("no definition of {type_name}"));
+        let ours = scaledp_schema::msg::definition(type_name)
+            .unwrap_or_else(|| panic!("no definition of {type_name}"));
         assert_eq!(ours, text.as_str().unwrap(), "{type_name}");
     }
-    assert_eq!(Image::definition(), defs["sensor_msgs/msg/Image"].as_str().unwrap());
+    assert_eq!(
+        Image::definition(),
+        defs["sensor_msgs/msg/Image"].as_str().unwrap()
+    );
 
     check(
         &reference,
@@ -60,7 +80,15 @@ fn definitions_and_cdr_match_rosbags() {
             data: (0..24).collect(),
         },
     );
-    check(&reference, "compressed", CompressedImage { header: header(), format: "jpeg".into(), data: vec![255, 216, 255, 217] });
+    check(
+        &reference,
+        "compressed",
+        CompressedImage {
+            header: header(),
+            format: "jpeg".into(),
+            data: vec![255, 216, 255, 217],
+        },
+    );
     check(
         &reference,
         "joint_state",
@@ -79,8 +107,17 @@ fn definitions_and_cdr_match_rosbags() {
         PoseStamped {
             header: header(),
             pose: Pose {
-                position: Point { x: 0.1, y: -0.2, z: 0.3 },
-                orientation: Quaternion { x: 0.0, y: 0.0, z: h, w: h },
+                position: Point {
+                    x: 0.1,
+                    y: -0.2,
+                    z: 0.3,
+                },
+                orientation: Quaternion {
+                    x: 0.0,
+                    y: 0.0,
+                    z: h,
+                    w: h,
+                },
             },
         },
     );
