@@ -2,8 +2,28 @@
 //! ROS 1 bags → LeRobot v3.0 datasets with time-aligned frames, resized JPEG images, proprio
 //! state and 6D end-effector pose actions computed by forward kinematics.
 
+pub mod align;
+mod batch;
+mod decode;
+mod detect;
+pub mod episode;
 mod error;
+pub mod frames;
+pub mod images;
+pub mod lerobot;
+mod mcap_source;
+pub mod ros1;
+mod rosbag2;
 pub mod source;
+pub mod stats;
+pub mod urdf;
 
+pub use batch::{
+    collect_inputs, content_hash, merge, read_input, run, shard, JobOptions, Outcome, Progress,
+};
+pub use episode::{ConvertOptions, Episode};
 pub use error::{Error, Result};
+pub use mcap_source::read_mcap;
+pub use ros1::read_ros1_bag;
+pub use rosbag2::read_rosbag2;
 pub use source::{RawMessage, Recording, Serialization, TopicInfo};

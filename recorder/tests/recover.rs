@@ -1,5 +1,7 @@
 //! `recover` keeps every chunk that was complete when the file was cut, and nothing broken.
 
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
 use std::collections::BTreeMap;
 
 use scaledp_recorder::{partial_path, recover, EpisodeOptions};

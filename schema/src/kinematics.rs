@@ -180,7 +180,8 @@ impl RobotModel {
 pub fn rpy_from_rotation(r: DMat3) -> [f64; 3] {
     // Column-major: r.col(c)[row].
     let r20 = r.col(0)[2];
-    let pitch = (-r20).clamp(-1.0, 1.0).asin();
+    // atan2 keeps full precision near ±π/2, where asin(−r20) loses digits.
+    let pitch = (-r20).atan2(r.col(0)[0].hypot(r.col(0)[1]));
     if r20.abs() < 1.0 - 1e-12 {
         let roll = r.col(1)[2].atan2(r.col(2)[2]);
         let yaw = r.col(0)[1].atan2(r.col(0)[0]);

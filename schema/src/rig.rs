@@ -42,6 +42,29 @@ pub struct Arm {
     pub rate_hz: f64,
     /// The gripper, if any.
     pub gripper: Option<Gripper>,
+    /// Forward kinematics from a URDF instead of the built-in model (the converter's choice).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub urdf: Option<UrdfSpec>,
+    /// The tool centre point in the flange (or URDF tip) frame: x, y, z (m), roll, pitch, yaw
+    /// (rad). Default: the Franka Hand TCP for Franka arms, the flange (`tool0`) for UR arms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tcp_xyz_rpy: Option<[f64; 6]>,
+    /// A topic whose messages are the action instead of the next measured pose: a
+    /// `geometry_msgs/PoseStamped` target or a leader arm's `sensor_msgs/JointState`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_topic: Option<String>,
+}
+
+/// A URDF serial chain for forward kinematics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UrdfSpec {
+    /// The URDF file (relative paths are relative to the working directory).
+    pub path: PathBuf,
+    /// Link the pose is expressed in.
+    pub base_link: String,
+    /// Link whose pose is computed (then the TCP offset is applied).
+    pub tip_link: String,
 }
 
 /// Gripper hardware, which fixes how joint positions map to an opening width.

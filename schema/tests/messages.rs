@@ -1,6 +1,8 @@
 //! Every message round-trips in both byte orders, and no prefix or corruption of a payload
 //! panics or allocates: it is an error.
 
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
 use scaledp_schema::msg::{
     CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion, Time,
 };

@@ -1,6 +1,8 @@
 //! `kill -9` a recording `scaledp record` process mid-episode, then `scaledp recover`: the file
 //! opens in ROS 2 tools and at most the last second of messages is gone.
 
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 

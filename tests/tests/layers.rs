@@ -1,5 +1,7 @@
 //! The layering rule: `schema` and `datasets` never pull in zenoh or rerun.
 
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
 use std::process::Command;
 
 #[test]

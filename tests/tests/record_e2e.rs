@@ -1,6 +1,8 @@
 //! Simulated rig → Zenoh (loopback) → recorder → MCAP, checked message by message against what
 //! the simulator published, by the Rust `mcap` crate and by two Python ROS 2 readers.
 
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};

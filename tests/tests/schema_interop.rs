@@ -1,5 +1,7 @@
 //! Our ros2msg texts and CDR bytes against what Python `rosbags` (rosbag2's conventions) makes.
 
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
 use scaledp_schema::msg::{
     CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion, Time,
 };

@@ -49,6 +49,11 @@ pub enum Command {
     Record(RecordArgs),
     /// Repair an MCAP file cut short by a crash, keeping every complete chunk.
     Recover(RecoverArgs),
+    /// Convert recordings and ROS bags into a LeRobot v3.0 dataset.
+    Convert(ConvertArgs),
+    /// Work with converted datasets.
+    #[command(subcommand)]
+    Dataset(DatasetCommand),
     /// Measure throughput and cost.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -168,6 +173,100 @@ pub struct RecoverArgs {
     /// Output (default: the name without .partial, or <stem>.recovered.mcap).
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+}
+
+/// `scaledp convert`.
+#[derive(Debug, Args)]
+pub struct ConvertArgs {
+    /// MCAP files, ROS 1 .bag files, rosbag2 directories or .db3 files, or directories holding
+    /// them (searched recursively; *.partial files and discarded/ directories are skipped).
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// The dataset directory (created, or extended: inputs already in it are skipped).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Rig file or shipped rig name mapping topics to cameras and arms (default: the rig stored
+    /// in each recording, else detected from message types and joint names).
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// Target frame rate (default: the rig's control rate).
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Output image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "320x240", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// JPEG quality of the stored images.
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub jpeg_quality: u8,
+    /// Task instruction for inputs that store none (bags).
+    #[arg(long)]
+    pub task: Option<String>,
+    /// A camera frame older than this many frame periods invalidates a tick.
+    #[arg(long, default_value_t = 1.5)]
+    pub stale_periods: f64,
+    /// Reject an episode when more than this fraction of its ticks are invalid.
+    #[arg(long, default_value_t = 0.05)]
+    pub max_invalid: f64,
+    /// Align on log (receive) times instead of header stamps.
+    #[arg(long)]
+    pub log_time: bool,
+    /// Convert only slice I of N of the sorted inputs (e.g. $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT).
+    #[arg(long, value_name = "I/N", value_parser = parse_shard)]
+    pub shard: Option<(usize, usize)>,
+    /// Episodes converted at once (default: the number of cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Rebuild the dataset from scratch instead of skipping inputs already converted.
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Target size of each data file (MB).
+    #[arg(long, default_value_t = 100)]
+    pub file_size_mb: u64,
+    /// Convert episodes recorded with outcome `failure` too.
+    #[arg(long)]
+    pub include_failures: bool,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once('x')
+        .ok_or("expected WIDTHxHEIGHT, e.g. 320x240")?;
+    let p = |v: &str| {
+        v.parse::<u32>()
+            .ok()
+            .filter(|&x| x > 0)
+            .ok_or(format!("bad size '{s}'"))
+    };
+    Ok((p(w)?, p(h)?))
+}
+
+fn parse_shard(s: &str) -> Result<(usize, usize), String> {
+    let (i, n) = s.split_once('/').ok_or("expected I/N, e.g. 0/4")?;
+    let (i, n): (usize, usize) = (
+        i.parse().map_err(|_| "bad I")?,
+        n.parse().map_err(|_| "bad N")?,
+    );
+    if n == 0 || i >= n {
+        return Err(format!("shard {i}/{n}: need 0 <= I < N"));
+    }
+    Ok((i, n))
+}
+
+/// `scaledp dataset`.
+#[derive(Debug, Subcommand)]
+pub enum DatasetCommand {
+    /// Join datasets (e.g. the shards of one batch), re-indexing episodes and re-aggregating stats.
+    Merge {
+        /// Datasets, in order.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The merged dataset (replaced if it exists).
+        #[arg(long)]
+        out: PathBuf,
+        /// Target size of each data file (MB).
+        #[arg(long, default_value_t = 100)]
+        file_size_mb: u64,
+    },
 }
 
 /// `scaledp bench`.

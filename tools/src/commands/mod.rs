@@ -1,6 +1,7 @@
 //! One module per subcommand; `dispatch` picks it.
 
 mod bench;
+mod convert;
 mod demo;
 mod record;
 mod recover;
@@ -16,6 +17,12 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
         Command::Sim(args) => sim::run(args),
         Command::Record(args) => record::run(args),
         Command::Recover(args) => recover::run(args),
+        Command::Convert(args) => convert::run(args),
+        Command::Dataset(crate::cli::DatasetCommand::Merge {
+            inputs,
+            out,
+            file_size_mb,
+        }) => convert::merge(&inputs, &out, file_size_mb),
         Command::Bench(crate::cli::BenchCommand::Record(args)) => bench::record(args),
         Command::Demo(args) => demo::run(args),
     }

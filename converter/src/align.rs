@@ -1,0 +1,291 @@
+//! Time alignment on capture stamps: a uniform grid of ticks at the target rate; at each tick
+//! every camera gives its latest frame at or before the tick and every joint stream is linearly
+//! interpolated. A camera frame older than `stale_periods` frame periods, or a joint stream with
+//! no samples around the tick, makes the tick invalid; invalid ticks at either end are trimmed,
+//! interior ones are counted (and the episode rejected past a threshold).
+
+use serde::{Deserialize, Serialize};
+
+/// One time series: capture stamps (ns, non-decreasing) and its nominal period (s).
+#[derive(Debug, Clone)]
+pub struct Stream {
+    /// Topic, for reports.
+    pub topic: String,
+    /// Capture stamps (ns).
+    pub stamps_ns: Vec<u64>,
+    /// Nominal period (s): from the rig, or the median interval.
+    pub period_s: f64,
+}
+
+impl Stream {
+    /// A stream whose nominal period comes from `rate_hz`, or from the median interval when None.
+    pub fn new(topic: &str, stamps_ns: Vec<u64>, rate_hz: Option<f64>) -> Self {
+        let period_s = match rate_hz {
+            Some(r) if r > 0.0 => 1.0 / r,
+            _ => median_interval_s(&stamps_ns).unwrap_or(0.1),
+        };
+        Self {
+            topic: topic.into(),
+            stamps_ns,
+            period_s,
+        }
+    }
+
+    /// Index of the latest sample at or before `t_ns`.
+    pub fn latest_at(&self, t_ns: u64) -> Option<usize> {
+        self.stamps_ns
+            .partition_point(|&s| s <= t_ns)
+            .checked_sub(1)
+    }
+
+    /// (i, i + 1, weight of i + 1) bracketing `t_ns`, or the exact sample.
+    pub fn bracket(&self, t_ns: u64) -> Option<(usize, usize, f64)> {
+        let i = self.latest_at(t_ns)?;
+        if self.stamps_ns[i] == t_ns || i + 1 >= self.stamps_ns.len() {
+            return (self.stamps_ns[i] == t_ns).then_some((i, i, 0.0));
+        }
+        let (a, b) = (self.stamps_ns[i], self.stamps_ns[i + 1]);
+        Some((i, i + 1, (t_ns - a) as f64 / (b - a).max(1) as f64))
+    }
+}
+
+/// Median interval between consecutive stamps (s).
+pub fn median_interval_s(stamps_ns: &[u64]) -> Option<f64> {
+    let mut d: Vec<u64> = stamps_ns
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .filter(|&x| x > 0)
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    let mid = d.len() / 2;
+    let (_, m, _) = d.select_nth_unstable(mid);
+    Some(*m as f64 * 1e-9)
+}
+
+/// Gaps and drops of one stream: intervals longer than 1.5 nominal periods.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct StreamReport {
+    /// Topic.
+    pub topic: String,
+    /// Messages.
+    pub messages: usize,
+    /// Intervals longer than 1.5 periods.
+    pub gaps: usize,
+    /// Frames or samples missing inside those gaps.
+    pub dropped: u64,
+    /// Longest interval (s).
+    pub max_interval_s: f64,
+}
+
+/// What alignment measured for an episode.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct AlignmentReport {
+    /// Ticks kept.
+    pub ticks: usize,
+    /// Invalid ticks trimmed from the start and end.
+    pub trimmed: usize,
+    /// Invalid ticks inside the kept range (they reuse the last frame / sample).
+    pub invalid: usize,
+    /// Largest spread of the chosen cameras' capture stamps at one tick (s).
+    pub max_camera_skew_s: f64,
+    /// Largest age of a chosen camera frame at its tick (s).
+    pub max_frame_age_s: f64,
+    /// Per stream.
+    pub streams: Vec<StreamReport>,
+}
+
+/// The tick grid and, per tick, the chosen frame of every camera and the bracket of every
+/// joint stream.
+#[derive(Debug, Clone)]
+pub struct Alignment {
+    /// Tick times (ns).
+    pub ticks_ns: Vec<u64>,
+    /// `[tick][camera]` → frame index in that camera's stream.
+    pub frames: Vec<Vec<usize>>,
+    /// `[tick][joint stream]` → (i, j, weight of j).
+    pub samples: Vec<Vec<(usize, usize, f64)>>,
+    /// Measurements.
+    pub report: AlignmentReport,
+}
+
+/// Aligns `cameras` and `joints` at `fps`. `Err` names the reason an episode cannot be aligned.
+pub fn align(
+    cameras: &[Stream],
+    joints: &[Stream],
+    fps: f64,
+    stale_periods: f64,
+    max_invalid_fraction: f64,
+) -> Result<Alignment, String> {
+    let all: Vec<&Stream> = cameras.iter().chain(joints).collect();
+    for s in &all {
+        if s.stamps_ns.is_empty() {
+            return Err(format!("{} has no messages", s.topic));
+        }
+    }
+    let start = all.iter().map(|s| s.stamps_ns[0]).max().unwrap_or(0);
+    let end = all
+        .iter()
+        .map(|s| s.stamps_ns[s.stamps_ns.len() - 1])
+        .min()
+        .unwrap_or(0);
+    if end <= start {
+        return Err("the streams do not overlap in time".into());
+    }
+    let step_ns = 1e9 / fps;
+    let n = ((end - start) as f64 / step_ns).floor() as usize + 1;
+    let mut ticks = Vec::with_capacity(n);
+    let mut frames = Vec::with_capacity(n);
+    let mut samples = Vec::with_capacity(n);
+    let mut valid = Vec::with_capacity(n);
+    let (mut max_skew, mut max_age) = (0.0f64, 0.0f64);
+    for k in 0..n {
+        let t = start + (k as f64 * step_ns).round() as u64;
+        let mut ok = true;
+        let mut chosen = Vec::with_capacity(cameras.len());
+        let (mut lo, mut hi) = (u64::MAX, 0);
+        for c in cameras {
+            let i = c.latest_at(t).unwrap_or(0);
+            let s = c.stamps_ns[i];
+            let age = t.saturating_sub(s) as f64 * 1e-9;
+            ok &= s <= t && age <= stale_periods * c.period_s;
+            max_age = max_age.max(age);
+            lo = lo.min(s);
+            hi = hi.max(s);
+            chosen.push(i);
+        }
+        if !cameras.is_empty() {
+            max_skew = max_skew.max((hi - lo) as f64 * 1e-9);
+        }
+        let mut brackets = Vec::with_capacity(joints.len());
+        for j in joints {
+            let b = j.bracket(t);
+            let gap_s = b.map_or(f64::INFINITY, |(i, k, _)| {
+                (j.stamps_ns[k] - j.stamps_ns[i]) as f64 * 1e-9
+            });
+            // Interpolating across a hole of more than ten periods (and 50 ms) would invent motion.
+            ok &= gap_s <= (10.0 * j.period_s).max(0.05);
+            brackets.push(b.unwrap_or((0, 0, 0.0)));
+        }
+        ticks.push(t);
+        frames.push(chosen);
+        samples.push(brackets);
+        valid.push(ok);
+    }
+    let first = valid
+        .iter()
+        .position(|&v| v)
+        .ok_or("no tick has fresh data from every stream")?;
+    let last = valid.iter().rposition(|&v| v).unwrap_or(first);
+    let kept = last - first + 1;
+    let invalid = valid[first..=last].iter().filter(|&&v| !v).count();
+    if kept < 2 {
+        return Err("fewer than 2 aligned ticks".into());
+    }
+    if invalid as f64 > max_invalid_fraction * kept as f64 {
+        return Err(format!(
+            "{invalid} of {kept} ticks have a stale camera frame or a joint gap (limit {:.0} %)",
+            max_invalid_fraction * 100.0
+        ));
+    }
+    let streams = all.iter().map(|s| stream_report(s)).collect();
+    Ok(Alignment {
+        ticks_ns: ticks[first..=last].to_vec(),
+        frames: frames[first..=last].to_vec(),
+        samples: samples[first..=last].to_vec(),
+        report: AlignmentReport {
+            ticks: kept,
+            trimmed: n - kept,
+            invalid,
+            max_camera_skew_s: max_skew,
+            max_frame_age_s: max_age,
+            streams,
+        },
+    })
+}
+
+fn stream_report(s: &Stream) -> StreamReport {
+    let mut r = StreamReport {
+        topic: s.topic.clone(),
+        messages: s.stamps_ns.len(),
+        ..Default::default()
+    };
+    for w in s.stamps_ns.windows(2) {
+        let dt = (w[1] - w[0]) as f64 * 1e-9;
+        r.max_interval_s = r.max_interval_s.max(dt);
+        if dt > 1.5 * s.period_s {
+            r.gaps += 1;
+            r.dropped += ((dt / s.period_s).round() as u64).saturating_sub(1);
+        }
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(start_ms: u64, period_ms: f64, n: usize) -> Vec<u64> {
+        (0..n)
+            .map(|k| start_ms * 1_000_000 + (k as f64 * period_ms * 1e6) as u64)
+            .collect()
+    }
+
+    #[test]
+    fn latest_frame_and_interpolation() {
+        let cam = Stream::new("/cam", grid(0, 33.3, 31), Some(30.0));
+        let joints = Stream::new("/joints", grid(0, 1.0, 1001), Some(1000.0));
+        let a = align(
+            std::slice::from_ref(&cam),
+            std::slice::from_ref(&joints),
+            10.0,
+            1.5,
+            0.0,
+        )
+        .unwrap();
+        assert_eq!(a.report.ticks, 10);
+        for (k, t) in a.ticks_ns.iter().enumerate() {
+            let f = a.frames[k][0];
+            assert!(cam.stamps_ns[f] <= *t && *t - cam.stamps_ns[f] < 34_000_000);
+            let (i, j, w) = a.samples[k][0];
+            let interp = joints.stamps_ns[i] as f64 * (1.0 - w) + joints.stamps_ns[j] as f64 * w;
+            assert!((interp - *t as f64).abs() < 1.0);
+        }
+        assert_eq!(a.report.invalid, 0);
+    }
+
+    #[test]
+    fn stale_frames_invalidate_and_gaps_are_counted() {
+        let mut stamps = grid(0, 33.3, 61);
+        stamps.drain(20..30); // a third of a second without frames
+        let cam = Stream::new("/cam", stamps, Some(30.0));
+        let joints = Stream::new("/joints", grid(0, 1.0, 2001), Some(1000.0));
+        let e = align(
+            std::slice::from_ref(&cam),
+            std::slice::from_ref(&joints),
+            10.0,
+            1.5,
+            0.0,
+        )
+        .unwrap_err();
+        assert!(e.contains("stale camera frame"), "{e}");
+        let a = align(&[cam], &[joints], 10.0, 1.5, 0.2).unwrap();
+        assert!(a.report.invalid >= 2);
+        let cam_report = &a.report.streams[0];
+        assert_eq!((cam_report.gaps, cam_report.dropped), (1, 10));
+    }
+
+    #[test]
+    fn missing_streams_are_errors() {
+        let e = align(
+            &[Stream::new("/cam", vec![], Some(30.0))],
+            &[],
+            10.0,
+            1.5,
+            0.1,
+        )
+        .unwrap_err();
+        assert_eq!(e, "/cam has no messages");
+    }
+}

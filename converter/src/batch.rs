@@ -1,0 +1,327 @@
+//! The batch job: many inputs → one dataset, converted in parallel, committed in input order,
+//! one failure never stopping the rest.
+
+use std::collections::BTreeMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+
+use rayon::prelude::*;
+
+use crate::episode::{convert, ConvertOptions, Episode};
+use crate::error::{Error, Result};
+use crate::lerobot::{Dataset, EpisodeRecord};
+use crate::source::{Recording, TopicInfo};
+
+/// Settings of a conversion job.
+#[derive(Debug, Clone)]
+pub struct JobOptions {
+    /// Per-episode conversion settings.
+    pub convert: ConvertOptions,
+    /// Reconvert inputs already in the dataset (the dataset is rebuilt from scratch).
+    pub overwrite: bool,
+    /// Convert only slice `i` of `n` of the sorted inputs (contiguous, so merging the shards in
+    /// order equals one run).
+    pub shard: Option<(usize, usize)>,
+    /// Episodes converted at once (each holds its recording in memory).
+    pub jobs: usize,
+    /// Data file size target (MB).
+    pub file_size_mb: u64,
+    /// Also convert episodes whose recorded outcome is `failure`.
+    pub include_failures: bool,
+}
+
+impl Default for JobOptions {
+    fn default() -> Self {
+        Self {
+            convert: ConvertOptions::default(),
+            overwrite: false,
+            shard: None,
+            jobs: std::thread::available_parallelism().map_or(2, usize::from),
+            file_size_mb: 100,
+            include_failures: false,
+        }
+    }
+}
+
+/// What happened to one input.
+#[derive(Debug, Clone)]
+pub enum Outcome {
+    /// Converted and committed.
+    Converted(Box<EpisodeRecord>),
+    /// Already in the dataset (same content hash), or excluded by its recorded outcome.
+    Skipped(String),
+    /// Could not be converted: one line naming the file and the reason.
+    Failed(String),
+}
+
+/// Progress events for a front end.
+#[derive(Debug, Clone)]
+pub enum Progress {
+    /// The number of inputs in this job (after sharding).
+    Total(usize),
+    /// One input is done.
+    Done {
+        /// The input.
+        input: PathBuf,
+        /// What happened.
+        outcome: Outcome,
+        /// Frames in the episode (0 unless converted).
+        frames: usize,
+        /// Bytes of the input.
+        bytes: u64,
+    },
+}
+
+/// Expands directories into inputs: rosbag2 directories (with `metadata.yaml`), `.mcap`,
+/// `.bag` and `.db3` files; skips `*.partial` files and `discarded/` directories. Sorted.
+pub fn collect_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    fn walk(p: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+        if p.is_dir() {
+            if p.join("metadata.yaml").exists() {
+                out.push(p.into());
+                return Ok(());
+            }
+            if p.file_name().is_some_and(|n| n == "discarded") {
+                return Ok(());
+            }
+            for e in std::fs::read_dir(p).map_err(Error::io(p))?.flatten() {
+                walk(&e.path(), out)?;
+            }
+        } else if matches!(
+            p.extension().and_then(|e| e.to_str()),
+            Some("mcap" | "bag" | "db3")
+        ) {
+            out.push(p.into());
+        }
+        Ok(())
+    }
+    let mut out = Vec::new();
+    for p in paths {
+        if !p.exists() {
+            return Err(Error::input(p, "no such file or directory"));
+        }
+        if p.is_file()
+            && !matches!(
+                p.extension().and_then(|e| e.to_str()),
+                Some("mcap" | "bag" | "db3")
+            )
+        {
+            return Err(Error::input(
+                p,
+                "not an .mcap, .bag or .db3 file, nor a directory",
+            ));
+        }
+        walk(p, &mut out)?;
+    }
+    out.sort();
+    out.dedup();
+    Ok(out)
+}
+
+/// The inputs of shard `i` of `n`: a contiguous slice of the sorted list.
+pub fn shard(inputs: &[PathBuf], i: usize, n: usize) -> &[PathBuf] {
+    let len = inputs.len();
+    &inputs[len * i / n..len * (i + 1) / n]
+}
+
+/// BLAKE3 of a file, or of a directory's files (names and contents, in name order).
+pub fn content_hash(path: &Path) -> Result<String> {
+    let mut h = blake3::Hasher::new();
+    let mut files = vec![];
+    if path.is_dir() {
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
+            .map_err(Error::io(path))?
+            .flatten()
+            .map(|e| e.path())
+            .collect();
+        entries.sort();
+        files.extend(entries.into_iter().filter(|p| p.is_file()));
+    } else {
+        files.push(path.to_path_buf());
+    }
+    for f in files {
+        h.update(
+            f.file_name()
+                .map(|n| n.as_encoded_bytes())
+                .unwrap_or_default(),
+        );
+        let mut file = std::fs::File::open(&f).map_err(Error::io(&f))?;
+        let mut buf = vec![0u8; 1 << 20];
+        loop {
+            let n = file.read(&mut buf).map_err(Error::io(&f))?;
+            if n == 0 {
+                break;
+            }
+            h.update(&buf[..n]);
+        }
+    }
+    Ok(h.finalize().to_hex().to_string())
+}
+
+fn input_bytes(path: &Path) -> u64 {
+    if path.is_dir() {
+        std::fs::read_dir(path)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter_map(|e| e.metadata().ok())
+            .map(|m| m.len())
+            .sum()
+    } else {
+        std::fs::metadata(path).map_or(0, |m| m.len())
+    }
+}
+
+/// The message types a conversion can use.
+fn useful_topic(t: &TopicInfo) -> bool {
+    matches!(
+        t.message_type.as_str(),
+        "sensor_msgs/msg/Image"
+            | "sensor_msgs/msg/CompressedImage"
+            | "sensor_msgs/msg/JointState"
+            | "geometry_msgs/msg/PoseStamped"
+    )
+}
+
+/// Reads any supported input whole, keeping only the topics a conversion can use.
+pub fn read_input(path: &Path) -> Result<Recording> {
+    let want = useful_topic;
+    if path.is_dir() || path.extension().is_some_and(|e| e == "db3") {
+        return crate::read_rosbag2(path, &want);
+    }
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("bag") => crate::read_ros1_bag(path, &want),
+        _ => crate::read_mcap(path, &want),
+    }
+}
+
+fn convert_one(path: &Path, opts: &JobOptions) -> std::result::Result<Episode, Outcome> {
+    let failed = |e: Error| Outcome::Failed(e.to_string());
+    if path.is_file() && path.extension().is_some_and(|e| e == "mcap") {
+        let (rec, frames) = crate::frames::read_mcap_light(path, &useful_topic).map_err(failed)?;
+        check_outcome(&rec, opts)?;
+        return convert(path, &rec, &frames, &opts.convert).map_err(failed);
+    }
+    let rec = read_input(path).map_err(failed)?;
+    check_outcome(&rec, opts)?;
+    convert(path, &rec, &crate::frames::InMemory(&rec), &opts.convert).map_err(failed)
+}
+
+/// Skips episodes the operator marked as discarded or failed.
+fn check_outcome(rec: &Recording, opts: &JobOptions) -> std::result::Result<(), Outcome> {
+    let outcome = ["scaledp.episode", "scaledp.episode.start"]
+        .iter()
+        .find_map(|n| rec.metadata.get(*n).and_then(|m| m.get("outcome")).cloned());
+    match outcome.as_deref() {
+        Some("discarded") => return Err(Outcome::Skipped("recorded outcome: discarded".into())),
+        Some("failure") if !opts.include_failures => {
+            return Err(Outcome::Skipped(
+                "recorded outcome: failure (see --include-failures)".into(),
+            ))
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// Converts `inputs` into the dataset at `out`. Inputs already present (by content hash) are
+/// skipped. Episodes are committed in input order whatever order they finish in; a failure is
+/// reported and the rest go on. Returns one outcome per input, in input order.
+pub fn run(
+    inputs: &[PathBuf],
+    out: &Path,
+    opts: &JobOptions,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<Vec<(PathBuf, Outcome)>> {
+    let inputs = match opts.shard {
+        Some((i, n)) if n > 0 && i < n => shard(inputs, i, n).to_vec(),
+        Some((i, n)) => {
+            return Err(Error::input(
+                out,
+                format!("bad shard {i}/{n}: need 0 ≤ I < N"),
+            ))
+        }
+        None => inputs.to_vec(),
+    };
+    let mut dataset = Dataset::open(out, opts.overwrite, opts.file_size_mb)?;
+    progress(Progress::Total(inputs.len()));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.jobs.max(1))
+        .build()
+        .map_err(|e| Error::input(out, format!("thread pool: {e}")))?;
+    let (tx, rx) = mpsc::channel::<(usize, String, std::result::Result<Episode, Outcome>)>();
+    let mut results: BTreeMap<usize, (PathBuf, Outcome)> = BTreeMap::new();
+    std::thread::scope(|scope| -> Result<()> {
+        let inputs_ref = &inputs;
+        let existing: Vec<String> = dataset
+            .episodes()
+            .iter()
+            .map(|e| e.source_hash.clone())
+            .collect();
+        scope.spawn(move || {
+            pool.install(|| {
+                inputs_ref
+                    .par_iter()
+                    .enumerate()
+                    .for_each_with(tx, |tx, (i, path)| {
+                        let hash = content_hash(path);
+                        let r = match &hash {
+                            Err(e) => Err(Outcome::Failed(e.to_string())),
+                            Ok(h) if existing.contains(h) => {
+                                Err(Outcome::Skipped("already in the dataset".into()))
+                            }
+                            Ok(_) => convert_one(path, opts),
+                        };
+                        let _ = tx.send((i, hash.unwrap_or_default(), r));
+                    });
+            })
+        });
+        // Commit in input order: hold finished episodes until all before them are done.
+        let mut pending: BTreeMap<usize, (String, std::result::Result<Episode, Outcome>)> =
+            BTreeMap::new();
+        let mut next = 0;
+        for (i, hash, r) in rx {
+            pending.insert(i, (hash, r));
+            while let Some((hash, r)) = pending.remove(&next) {
+                let path = inputs[next].clone();
+                let (outcome, frames) = match r {
+                    Ok(ep) => match dataset.add(&ep, &hash) {
+                        Ok(rec) => (Outcome::Converted(Box::new(rec)), ep.len()),
+                        Err(e @ Error::Rejected { .. }) => (Outcome::Failed(e.to_string()), 0),
+                        Err(e) => return Err(e),
+                    },
+                    Err(o) => (o, 0),
+                };
+                progress(Progress::Done {
+                    input: path.clone(),
+                    outcome: outcome.clone(),
+                    frames,
+                    bytes: input_bytes(&path),
+                });
+                results.insert(next, (path, outcome));
+                next += 1;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(results.into_values().collect())
+}
+
+/// Joins scaledp datasets (e.g. the outputs of `--shard 0/N … N-1/N`) into `out`, in the order
+/// given, re-indexing episodes, frames and tasks and re-aggregating statistics.
+pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mb: u64) -> Result<usize> {
+    let mut dataset = Dataset::open(out, true, file_size_mb)?;
+    let mut n = 0;
+    for input in inputs {
+        let record = input.join("meta/scaledp.json");
+        let text = std::fs::read(&record).map_err(Error::io(&record))?;
+        let sidecar: crate::lerobot::Sidecar = serde_json::from_slice(&text)
+            .map_err(|e| Error::input(&record, format!("unreadable: {e}")))?;
+        for ep in &sidecar.episodes {
+            dataset.add_from(input, &sidecar, ep)?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}

@@ -1,0 +1,73 @@
+//! Raw messages → typed ROS messages, whatever their serialization.
+
+use std::path::Path;
+
+use scaledp_schema::msg::{CompressedImage, Image, JointState, PoseStamped};
+use scaledp_schema::RosMessage;
+
+use crate::error::{Error, Result};
+use crate::source::{RawMessage, Serialization};
+
+fn wrap<T>(path: &Path, m: &RawMessage, r: std::result::Result<T, String>) -> Result<T> {
+    r.map_err(|reason| Error::Message {
+        path: path.into(),
+        topic: m.topic.clone(),
+        log_time_ns: m.log_time_ns,
+        reason,
+    })
+}
+
+/// A camera frame: raw or compressed.
+#[derive(Debug, Clone)]
+pub enum Frame {
+    /// `sensor_msgs/Image`.
+    Raw(Image),
+    /// `sensor_msgs/CompressedImage`.
+    Compressed(CompressedImage),
+}
+
+impl Frame {
+    /// Capture stamp (ns).
+    pub fn stamp_ns(&self) -> u64 {
+        match self {
+            Self::Raw(i) => i.header.stamp.as_ns(),
+            Self::Compressed(c) => c.header.stamp.as_ns(),
+        }
+    }
+}
+
+/// Decodes an image message (raw or compressed) from `path`.
+pub fn frame(path: &Path, m: &RawMessage) -> Result<Frame> {
+    let compressed = m.message_type.ends_with("/CompressedImage");
+    let r = match (m.serialization, compressed) {
+        (Serialization::Cdr, false) => Image::from_cdr(&m.data)
+            .map(Frame::Raw)
+            .map_err(|e| e.to_string()),
+        (Serialization::Cdr, true) => CompressedImage::from_cdr(&m.data)
+            .map(Frame::Compressed)
+            .map_err(|e| e.to_string()),
+        (Serialization::Ros1, false) => crate::ros1::decode::image(&m.data).map(Frame::Raw),
+        (Serialization::Ros1, true) => {
+            crate::ros1::decode::compressed_image(&m.data).map(Frame::Compressed)
+        }
+    };
+    wrap(path, m, r)
+}
+
+/// Decodes a `sensor_msgs/JointState`.
+pub fn joint_state(path: &Path, m: &RawMessage) -> Result<JointState> {
+    let r = match m.serialization {
+        Serialization::Cdr => JointState::from_cdr(&m.data).map_err(|e| e.to_string()),
+        Serialization::Ros1 => crate::ros1::decode::joint_state(&m.data),
+    };
+    wrap(path, m, r)
+}
+
+/// Decodes a `geometry_msgs/PoseStamped`.
+pub fn pose_stamped(path: &Path, m: &RawMessage) -> Result<PoseStamped> {
+    let r = match m.serialization {
+        Serialization::Cdr => PoseStamped::from_cdr(&m.data).map_err(|e| e.to_string()),
+        Serialization::Ros1 => crate::ros1::decode::pose_stamped(&m.data),
+    };
+    wrap(path, m, r)
+}

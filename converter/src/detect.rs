@@ -1,0 +1,223 @@
+//! Which rig an input was recorded with: the `--rig` given, else the rig our recorder stored in
+//! the episode's metadata, else one detected from message types and joint names.
+
+use std::path::Path;
+
+use scaledp_schema::rig::{Arm, Camera, CameraModel, Gripper, GripperModel, Rig};
+use scaledp_schema::RobotModel;
+
+use crate::align::median_interval_s;
+use crate::error::{Error, Result};
+use crate::source::Recording;
+
+/// The rig stored by `scaledp record` in `scaledp.episode` (or `.start`) metadata, if any.
+pub fn from_metadata(path: &Path, rec: &Recording) -> Result<Option<Rig>> {
+    for name in ["scaledp.episode", "scaledp.episode.start"] {
+        if let Some(text) = rec.metadata.get(name).and_then(|m| m.get("rig")) {
+            return Rig::parse(text, path)
+                .map(Some)
+                .map_err(|e| Error::input(path, format!("stored rig: {e}")));
+        }
+    }
+    Ok(None)
+}
+
+/// The task stored by `scaledp record`, if any.
+pub fn task_from_metadata(rec: &Recording) -> Option<String> {
+    ["scaledp.episode", "scaledp.episode.start"]
+        .iter()
+        .find_map(|n| {
+            rec.metadata
+                .get(*n)
+                .and_then(|m| m.get("task"))
+                .filter(|t| !t.is_empty())
+                .cloned()
+        })
+}
+
+fn rate_hz(rec: &Recording, topic: &str) -> f64 {
+    let stamps: Vec<u64> = rec
+        .messages
+        .iter()
+        .filter(|m| m.topic == topic)
+        .map(|m| m.log_time_ns)
+        .collect();
+    median_interval_s(&stamps).map_or(30.0, |p| (1.0 / p).round().max(1.0))
+}
+
+/// A short feature name for a topic: its first path segment unless that is generic.
+fn camera_name(topic: &str, taken: &[Camera]) -> String {
+    let parts: Vec<&str> = topic.trim_matches('/').split('/').collect();
+    let mut name = parts.first().copied().unwrap_or("camera").to_string();
+    if name == "camera" && parts.len() > 1 {
+        name = parts[1].to_string();
+    }
+    let base = name.replace(|c: char| !c.is_ascii_alphanumeric() && c != '_', "_");
+    let mut name = base.clone();
+    let mut k = 1;
+    while taken.iter().any(|c| c.name == name) {
+        k += 1;
+        name = format!("{base}_{k}");
+    }
+    name
+}
+
+const UR_JOINTS: [&str; 6] = [
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+];
+
+/// Matches a joint-name list to a known arm: (model, the arm's joint names in order, prefix).
+fn match_arm(names: &[String]) -> Option<(RobotModel, Vec<String>, String)> {
+    for (model, stem) in [
+        (RobotModel::Fr3, "fr3_joint"),
+        (RobotModel::Panda, "panda_joint"),
+    ] {
+        let joints: Vec<String> = (1..=7).map(|i| format!("{stem}{i}")).collect();
+        if joints.iter().all(|j| names.contains(j)) {
+            return Some((model, joints, stem.trim_end_matches("_joint").to_string()));
+        }
+    }
+    let first = names.iter().find(|n| n.ends_with("shoulder_pan_joint"))?;
+    let prefix = first.trim_end_matches("shoulder_pan_joint").to_string();
+    let joints: Vec<String> = UR_JOINTS.iter().map(|j| format!("{prefix}{j}")).collect();
+    joints
+        .iter()
+        .all(|j| names.contains(j))
+        .then_some((RobotModel::Ur5, joints, prefix))
+}
+
+/// Detects cameras (Image / CompressedImage topics) and arms and grippers (JointState topics
+/// whose names match FR3, Panda, UR or a Franka Hand / Robotiq gripper). UR arms are taken as
+/// UR5; pass `--rig` for a UR5e.
+pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig> {
+    let mut cameras: Vec<Camera> = Vec::new();
+    let mut arms: Vec<Arm> = Vec::new();
+    let mut grippers: Vec<(String, Gripper)> = Vec::new();
+    for t in &rec.topics {
+        let Some(first) = rec.messages.iter().find(|m| m.topic == t.topic) else {
+            continue;
+        };
+        match t.message_type.as_str() {
+            "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage" => {
+                let frame = crate::decode::frame(path, first)?;
+                let (w, h, enc) = match &frame {
+                    crate::decode::Frame::Raw(i) => (i.width, i.height, Some(i.encoding.clone())),
+                    crate::decode::Frame::Compressed(_) => (0, 0, None),
+                };
+                cameras.push(Camera {
+                    name: camera_name(&t.topic, &cameras),
+                    topic: t.topic.clone(),
+                    model: if enc.as_deref() == Some("bgra8") {
+                        CameraModel::Zed
+                    } else {
+                        CameraModel::Realsense
+                    },
+                    width: w.max(1),
+                    height: h.max(1),
+                    fps: rate_hz(rec, &t.topic),
+                    encoding: enc,
+                    compressed: t.message_type.ends_with("CompressedImage"),
+                });
+            }
+            "sensor_msgs/msg/JointState" => {
+                let js = crate::decode::joint_state(path, first)?;
+                let rate = rate_hz(rec, &t.topic);
+                if let Some((model, joint_names, prefix)) = match_arm(&js.name) {
+                    let name = match prefix.trim_end_matches('_') {
+                        "" | "fr3" | "panda" => format!(
+                            "arm{}",
+                            if arms.is_empty() {
+                                String::new()
+                            } else {
+                                arms.len().to_string()
+                            }
+                        ),
+                        p => p.to_string(),
+                    };
+                    arms.push(Arm {
+                        name,
+                        model,
+                        joint_state_topic: t.topic.clone(),
+                        joint_names,
+                        rate_hz: rate,
+                        gripper: None,
+                        urdf: None,
+                        tcp_xyz_rpy: None,
+                        command_topic: None,
+                    });
+                } else if let Some(f) = js.name.iter().find(|n| n.ends_with("finger_joint1")) {
+                    let prefix = f.trim_end_matches("finger_joint1").to_string();
+                    let names = js
+                        .name
+                        .iter()
+                        .filter(|n| n.contains("finger_joint"))
+                        .cloned()
+                        .collect();
+                    grippers.push((
+                        prefix,
+                        Gripper {
+                            model: GripperModel::FrankaHand,
+                            topic: t.topic.clone(),
+                            joint_names: names,
+                            rate_hz: rate,
+                        },
+                    ));
+                } else if let Some(k) = js
+                    .name
+                    .iter()
+                    .find(|n| n.ends_with("robotiq_85_left_knuckle_joint"))
+                {
+                    let prefix = k
+                        .trim_end_matches("robotiq_85_left_knuckle_joint")
+                        .to_string();
+                    grippers.push((
+                        prefix,
+                        Gripper {
+                            model: GripperModel::Robotiq2f85,
+                            topic: t.topic.clone(),
+                            joint_names: vec![k.clone()],
+                            rate_hz: rate,
+                        },
+                    ));
+                }
+            }
+            _ => {}
+        }
+    }
+    for (prefix, g) in grippers {
+        // A gripper goes to the arm whose joints share its name prefix (fr3_, left_, …), else the
+        // only arm.
+        let n = arms.len();
+        let arm = arms
+            .iter_mut()
+            .find(|a| !prefix.is_empty() && a.joint_names[0].starts_with(&prefix));
+        match arm {
+            Some(a) => a.gripper = Some(g),
+            None if n == 1 => arms[0].gripper = Some(g),
+            None => tracing::warn!(
+                "{}: gripper on {} matches no arm; ignored",
+                path.display(),
+                g.topic
+            ),
+        }
+    }
+    if cameras.is_empty() && arms.is_empty() {
+        return Err(Error::input(
+            path,
+            "no camera or arm topics found (pass --rig to map topics)",
+        ));
+    }
+    let rig = Rig {
+        name: "detected".into(),
+        control_rate_hz,
+        arms,
+        cameras,
+    };
+    Rig::parse(&toml::to_string(&rig).unwrap_or_default(), path)
+        .map_err(|e| Error::input(path, format!("detected rig is inconsistent: {e}")))
+}

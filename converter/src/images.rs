@@ -1,0 +1,247 @@
+//! Camera frames → RGB → resized → JPEG, plus the per-channel statistics LeRobot keeps.
+
+use fast_image_resize as fr;
+
+use crate::decode::Frame;
+
+/// Tightly packed RGB8 pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rgb {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width × height × 3` bytes.
+    pub data: Vec<u8>,
+}
+
+/// Decodes a frame to RGB, honouring `step` (row padding) for raw images.
+pub fn to_rgb(frame: &Frame) -> Result<Rgb, String> {
+    match frame {
+        Frame::Raw(img) => {
+            let (w, h) = (img.width as usize, img.height as usize);
+            let (channels, order): (usize, [usize; 3]) = match img.encoding.as_str() {
+                "rgb8" => (3, [0, 1, 2]),
+                "bgr8" => (3, [2, 1, 0]),
+                "rgba8" => (4, [0, 1, 2]),
+                "bgra8" => (4, [2, 1, 0]),
+                "mono8" => (1, [0, 0, 0]),
+                other => return Err(format!("unsupported image encoding '{other}'")),
+            };
+            let step = img.step as usize;
+            if w == 0 || h == 0 {
+                return Err(format!("empty image {w}×{h}"));
+            }
+            if step < w * channels {
+                return Err(format!(
+                    "step {step} is smaller than width {w} × {channels} bytes"
+                ));
+            }
+            let needed = step * (h - 1) + w * channels;
+            if img.data.len() < needed {
+                return Err(format!(
+                    "{} data bytes, but {h} rows of step {step} need {needed}",
+                    img.data.len()
+                ));
+            }
+            let mut out = Vec::with_capacity(w * h * 3);
+            for row in img.data.chunks(step).take(h) {
+                for px in row[..w * channels].chunks_exact(channels) {
+                    out.extend_from_slice(&[px[order[0]], px[order[1]], px[order[2]]]);
+                }
+            }
+            Ok(Rgb {
+                width: img.width,
+                height: img.height,
+                data: out,
+            })
+        }
+        Frame::Compressed(c) => {
+            let img =
+                image::load_from_memory(&c.data).map_err(|e| format!("{} image: {e}", c.format))?;
+            let rgb = img.to_rgb8();
+            Ok(Rgb {
+                width: rgb.width(),
+                height: rgb.height(),
+                data: rgb.into_raw(),
+            })
+        }
+    }
+}
+
+/// Resizes with a Lanczos3 convolution (antialiased when shrinking); a no-op at the same size.
+pub fn resize(src: &Rgb, width: u32, height: u32) -> Result<Rgb, String> {
+    if src.width == width && src.height == height {
+        return Ok(src.clone());
+    }
+    let from = fr::images::ImageRef::new(src.width, src.height, &src.data, fr::PixelType::U8x3)
+        .map_err(|e| format!("resize: {e}"))?;
+    let mut to = fr::images::Image::new(width, height, fr::PixelType::U8x3);
+    let options =
+        fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Lanczos3));
+    fr::Resizer::new()
+        .resize(&from, &mut to, &options)
+        .map_err(|e| format!("resize: {e}"))?;
+    Ok(Rgb {
+        width,
+        height,
+        data: to.into_vec(),
+    })
+}
+
+/// Encodes RGB as baseline JPEG at `quality` (1–100).
+pub fn jpeg(src: &Rgb, quality: u8) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(src.data.len() / 8);
+    let encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
+    let (w, h) = (
+        u16::try_from(src.width).map_err(|_| "image too wide for JPEG")?,
+        u16::try_from(src.height).map_err(|_| "image too tall for JPEG")?,
+    );
+    encoder
+        .encode(&src.data, w, h, jpeg_encoder::ColorType::Rgb)
+        .map_err(|e| format!("jpeg: {e}"))?;
+    Ok(out)
+}
+
+/// Per-channel histogram of an episode's frames: exact min, max, mean, std and quantiles.
+#[derive(Debug, Clone)]
+pub struct ChannelHistogram {
+    counts: [[u64; 256]; 3],
+    frames: u64,
+}
+
+impl Default for ChannelHistogram {
+    fn default() -> Self {
+        Self {
+            counts: [[0; 256]; 3],
+            frames: 0,
+        }
+    }
+}
+
+impl ChannelHistogram {
+    /// Adds one frame.
+    pub fn add(&mut self, rgb: &Rgb) {
+        for px in rgb.data.chunks_exact(3) {
+            for (counts, &v) in self.counts.iter_mut().zip(px) {
+                counts[v as usize] += 1;
+            }
+        }
+        self.frames += 1;
+    }
+
+    /// Adds another histogram (a frame used by several ticks counts once per tick).
+    pub fn absorb(&mut self, other: &ChannelHistogram) {
+        for (mine, theirs) in self.counts.iter_mut().zip(&other.counts) {
+            for (a, b) in mine.iter_mut().zip(theirs) {
+                *a += b;
+            }
+        }
+        self.frames += other.frames;
+    }
+
+    /// Frames added.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// (min, max, mean, std, quantiles at `qs`) of channel `c`, values scaled to [0, 1].
+    pub fn channel(&self, c: usize, qs: &[f64]) -> (f64, f64, f64, f64, Vec<f64>) {
+        let h = &self.counts[c];
+        let n: u64 = h.iter().sum();
+        if n == 0 {
+            return (0.0, 0.0, 0.0, 0.0, vec![0.0; qs.len()]);
+        }
+        let min = h.iter().position(|&k| k > 0).unwrap_or(0) as f64 / 255.0;
+        let max = h.iter().rposition(|&k| k > 0).unwrap_or(0) as f64 / 255.0;
+        let (mut s, mut s2) = (0.0, 0.0);
+        for (v, &k) in h.iter().enumerate() {
+            let x = v as f64 / 255.0;
+            s += x * k as f64;
+            s2 += x * x * k as f64;
+        }
+        let mean = s / n as f64;
+        let std = (s2 / n as f64 - mean * mean).max(0.0).sqrt();
+        let quantiles = qs
+            .iter()
+            .map(|q| {
+                let target = (q * n as f64).ceil().max(1.0) as u64;
+                let mut acc = 0;
+                for (v, &k) in h.iter().enumerate() {
+                    acc += k;
+                    if acc >= target {
+                        return v as f64 / 255.0;
+                    }
+                }
+                max
+            })
+            .collect();
+        (min, max, mean, std, quantiles)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scaledp_schema::msg::Image;
+
+    fn raw(encoding: &str, w: u32, h: u32, step: u32, data: Vec<u8>) -> Frame {
+        Frame::Raw(Image {
+            encoding: encoding.into(),
+            width: w,
+            height: h,
+            step,
+            data,
+            ..Default::default()
+        })
+    }
+
+    #[test]
+    fn encodings_and_step_are_honoured() {
+        // 2×2 bgra8 with 4 bytes of padding per row.
+        let data = vec![
+            1, 2, 3, 255, 4, 5, 6, 255, 0, 0, 0, 0, 7, 8, 9, 255, 10, 11, 12, 255, 0, 0, 0, 0,
+        ];
+        let rgb = to_rgb(&raw("bgra8", 2, 2, 12, data)).unwrap();
+        assert_eq!(rgb.data, vec![3, 2, 1, 6, 5, 4, 9, 8, 7, 12, 11, 10]);
+        let mono = to_rgb(&raw("mono8", 2, 1, 2, vec![5, 6])).unwrap();
+        assert_eq!(mono.data, vec![5, 5, 5, 6, 6, 6]);
+        assert!(to_rgb(&raw("rgb8", 2, 2, 5, vec![0; 12]))
+            .unwrap_err()
+            .contains("step 5"));
+        assert!(to_rgb(&raw("rgb8", 2, 2, 6, vec![0; 11]))
+            .unwrap_err()
+            .contains("need 12"));
+        assert!(to_rgb(&raw("16UC1", 2, 2, 4, vec![0; 8]))
+            .unwrap_err()
+            .contains("16UC1"));
+    }
+
+    #[test]
+    fn resize_and_jpeg_round_trip() {
+        let src = Rgb {
+            width: 64,
+            height: 48,
+            data: (0..64 * 48 * 3).map(|i| (i % 251) as u8).collect(),
+        };
+        let small = resize(&src, 32, 24).unwrap();
+        assert_eq!(small.data.len(), 32 * 24 * 3);
+        let bytes = jpeg(&small, 90).unwrap();
+        let back = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        assert_eq!((back.width(), back.height()), (32, 24));
+    }
+
+    #[test]
+    fn histogram_stats() {
+        let mut h = ChannelHistogram::default();
+        h.add(&Rgb {
+            width: 2,
+            height: 1,
+            data: vec![0, 255, 51, 255, 255, 51],
+        });
+        let (min, max, mean, std, q) = h.channel(0, &[0.01, 0.5, 0.99]);
+        assert_eq!((min, max, mean, std), (0.0, 1.0, 0.5, 0.5));
+        assert_eq!(q, vec![0.0, 0.0, 1.0]);
+        assert_eq!(h.channel(2, &[0.5]).2, 0.2);
+    }
+}

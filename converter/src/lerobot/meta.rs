@@ -1,0 +1,333 @@
+//! The dataset's own record (`meta/scaledp.json`) and the LeRobot meta files made from it:
+//! `meta/info.json`, `meta/stats.json`, `meta/tasks.parquet`, `meta/episodes/chunk-000/file-000.parquet`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::columns::{self as col, write_atomic, write_parquet};
+use crate::align::AlignmentReport;
+use crate::error::{Error, Result};
+use crate::stats::{aggregate_all, Stats, QUANTILES};
+
+/// Files per chunk directory.
+pub const CHUNKS_SIZE: u64 = 1000;
+
+/// One committed episode.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeRecord {
+    /// Index in the dataset.
+    pub episode_index: u64,
+    /// Frames.
+    pub length: u64,
+    /// Index into the task list.
+    pub task_index: u64,
+    /// Data file (global number; chunk = n / 1000, file = n % 1000).
+    pub data_file: u64,
+    /// First global frame index.
+    pub from_index: u64,
+    /// One past the last global frame index.
+    pub to_index: u64,
+    /// The input it came from.
+    pub source: String,
+    /// BLAKE3 of the input's bytes.
+    pub source_hash: String,
+    /// Per-feature statistics.
+    pub stats: BTreeMap<String, Stats>,
+    /// Alignment measurements.
+    pub report: AlignmentReport,
+    /// `header.stamp` or `log_time`.
+    pub time_source: String,
+}
+
+/// Everything needed to rebuild the LeRobot meta files, and to resume or merge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sidecar {
+    /// Format version of this file.
+    pub format: u32,
+    /// Frame rate.
+    pub fps: f64,
+    /// Robot type (the rig's name).
+    pub robot_type: String,
+    /// The rig, as TOML.
+    pub rig: String,
+    /// Image width, height.
+    pub image_size: (u32, u32),
+    /// Camera names, in column order.
+    pub cameras: Vec<String>,
+    /// Names of state / action dimensions.
+    pub state_names: Vec<String>,
+    /// Names of joint dimensions.
+    pub joint_names: Vec<String>,
+    /// Task strings by task index.
+    pub tasks: Vec<String>,
+    /// Committed episodes, in order.
+    pub episodes: Vec<EpisodeRecord>,
+    /// Converter version that wrote it.
+    pub converter_version: String,
+}
+
+/// `data/chunk-XXX/file-YYY.parquet` of a global file number.
+pub fn data_path(root: &Path, file: u64) -> std::path::PathBuf {
+    root.join(format!(
+        "data/chunk-{:03}/file-{:03}.parquet",
+        file / CHUNKS_SIZE,
+        file % CHUNKS_SIZE
+    ))
+}
+
+/// Feature names in column order.
+pub fn feature_names(s: &Sidecar) -> Vec<String> {
+    let mut v: Vec<String> = s
+        .cameras
+        .iter()
+        .map(|c| format!("observation.images.{c}"))
+        .collect();
+    for f in [
+        "observation.state",
+        "action",
+        "observation.joints",
+        "timestamp",
+        "frame_index",
+        "episode_index",
+        "index",
+        "task_index",
+    ] {
+        v.push(f.into());
+    }
+    v
+}
+
+fn features_json(s: &Sidecar) -> serde_json::Value {
+    let (w, h) = s.image_size;
+    let mut m = serde_json::Map::new();
+    for c in &s.cameras {
+        m.insert(
+            format!("observation.images.{c}"),
+            serde_json::json!({"dtype": "image", "shape": [h, w, 3], "names": ["height", "width", "channels"]}),
+        );
+    }
+    let vector = |names: &[String]| serde_json::json!({"dtype": "float32", "shape": [names.len()], "names": names});
+    m.insert("observation.state".into(), vector(&s.state_names));
+    m.insert("action".into(), vector(&s.state_names));
+    m.insert("observation.joints".into(), vector(&s.joint_names));
+    m.insert(
+        "timestamp".into(),
+        serde_json::json!({"dtype": "float32", "shape": [1], "names": null}),
+    );
+    for f in ["frame_index", "episode_index", "index", "task_index"] {
+        m.insert(
+            f.into(),
+            serde_json::json!({"dtype": "int64", "shape": [1], "names": null}),
+        );
+    }
+    serde_json::Value::Object(m)
+}
+
+/// The `huggingface` schema metadata `datasets` writes for the data files.
+pub fn huggingface_metadata(s: &Sidecar) -> String {
+    let mut f = serde_json::Map::new();
+    for c in &s.cameras {
+        f.insert(
+            format!("observation.images.{c}"),
+            serde_json::json!({"_type": "Image"}),
+        );
+    }
+    let list = |n: usize| serde_json::json!({"feature": {"dtype": "float32", "_type": "Value"}, "length": n, "_type": "List"});
+    f.insert("observation.state".into(), list(s.state_names.len()));
+    f.insert("action".into(), list(s.state_names.len()));
+    f.insert("observation.joints".into(), list(s.joint_names.len()));
+    f.insert(
+        "timestamp".into(),
+        serde_json::json!({"dtype": "float32", "_type": "Value"}),
+    );
+    for n in ["frame_index", "episode_index", "index", "task_index"] {
+        f.insert(
+            n.into(),
+            serde_json::json!({"dtype": "int64", "_type": "Value"}),
+        );
+    }
+    serde_json::json!({"info": {"features": f}}).to_string()
+}
+
+fn fps_json(fps: f64) -> serde_json::Value {
+    if fps.fract() == 0.0 {
+        serde_json::json!(fps as u64)
+    } else {
+        serde_json::json!(fps)
+    }
+}
+
+/// Rewrites every LeRobot meta file from the sidecar, each atomically, the sidecar first.
+pub fn write_all(root: &Path, s: &Sidecar, data_files_size_mb: u64) -> Result<()> {
+    let json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
+    write_atomic(
+        &root.join("meta/scaledp.json"),
+        &serde_json::to_vec_pretty(s).unwrap_or_default(),
+    )?;
+    let total_frames: u64 = s.episodes.iter().map(|e| e.length).sum();
+    let info = serde_json::json!({
+        "codebase_version": "v3.0",
+        "robot_type": s.robot_type,
+        "total_episodes": s.episodes.len(),
+        "total_frames": total_frames,
+        "total_tasks": s.tasks.len(),
+        "chunks_size": CHUNKS_SIZE,
+        "data_files_size_in_mb": data_files_size_mb,
+        "video_files_size_in_mb": 200,
+        "fps": fps_json(s.fps),
+        "splits": {"train": format!("0:{}", s.episodes.len())},
+        "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
+        "video_path": null,
+        "features": features_json(s),
+        "scaledp": {
+            "converter_version": s.converter_version,
+            "rig": s.rig,
+            "fps": s.fps,
+            "image_size": [s.image_size.0, s.image_size.1],
+            "action": "absolute end-effector pose of the next tick (the last tick of each episode is dropped): per arm in rig order x, y, z (m), roll, pitch, yaw (rad, ROS R = Rz(yaw)·Ry(pitch)·Rx(roll), unwrapped along the episode), gripper opening (m); observation.state is the same at the current tick",
+            "kinematics": "built-in DH models (fr3/panda: modified DH, pose of the Franka Hand TCP — flange + 0.1034 m along z, −45° about z — in fr3_link0; ur5/ur5e: standard DH, pose of tool0 in the DH base frame) unless the rig names a URDF chain or a TCP offset",
+            "time_alignment": "ticks at fps on header.stamp capture times; latest camera frame at or before each tick; joints linearly interpolated",
+            "sources": s.episodes.iter().map(|e| serde_json::json!({"episode_index": e.episode_index, "source": e.source, "blake3": e.source_hash})).collect::<Vec<_>>(),
+        },
+    });
+    write_atomic(&root.join("meta/info.json"), &json(&info))?;
+    let agg = aggregate_all(s.episodes.iter().map(|e| &e.stats));
+    let stats: serde_json::Map<String, serde_json::Value> = agg
+        .iter()
+        .map(|(k, v)| (k.clone(), v.to_lerobot_json()))
+        .collect();
+    write_atomic(
+        &root.join("meta/stats.json"),
+        &json(&serde_json::Value::Object(stats)),
+    )?;
+    write_tasks(root, &s.tasks)?;
+    if !s.episodes.is_empty() {
+        write_episodes(root, s)?;
+    }
+    Ok(())
+}
+
+const PANDAS_TASKS: &str = r#"{"index_columns": ["__index_level_0__"], "column_indexes": [{"name": null, "field_name": null, "pandas_type": "unicode", "numpy_type": "str", "metadata": {"encoding": "UTF-8"}}], "columns": [{"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64", "metadata": null}, {"name": null, "field_name": "__index_level_0__", "pandas_type": "object", "numpy_type": "str", "metadata": null}], "attributes": {}, "creator": {"library": "pyarrow", "version": "26.0.1"}, "pandas_version": "3.1.1"}"#;
+
+fn write_tasks(root: &Path, tasks: &[String]) -> Result<()> {
+    if tasks.is_empty() {
+        return Ok(());
+    }
+    let batch = col::batch(
+        vec![
+            ("task_index".into(), col::i64s(0..tasks.len() as i64)),
+            (
+                "__index_level_0__".into(),
+                col::large_strings(tasks.iter().map(String::as_str)),
+            ),
+        ],
+        vec![("pandas".into(), PANDAS_TASKS.into())],
+    )?;
+    write_parquet(&root.join("meta/tasks.parquet"), &[batch]).map(drop)
+}
+
+fn write_episodes(root: &Path, s: &Sidecar) -> Result<()> {
+    let eps = &s.episodes;
+    let n = eps.len();
+    let u = |f: fn(&EpisodeRecord) -> u64| col::i64s(eps.iter().map(move |e| f(e) as i64));
+    let mut cols = vec![
+        ("episode_index".to_string(), u(|e| e.episode_index)),
+        (
+            "tasks".into(),
+            col::string_lists(
+                &eps.iter()
+                    .map(|e| vec![s.tasks[e.task_index as usize].clone()])
+                    .collect::<Vec<_>>(),
+            ),
+        ),
+        ("length".into(), u(|e| e.length)),
+        ("data/chunk_index".into(), u(|e| e.data_file / CHUNKS_SIZE)),
+        ("data/file_index".into(), u(|e| e.data_file % CHUNKS_SIZE)),
+        ("dataset_from_index".into(), u(|e| e.from_index)),
+        ("dataset_to_index".into(), u(|e| e.to_index)),
+    ];
+    for feature in feature_names(s) {
+        let per: Vec<&Stats> = eps
+            .iter()
+            .map(|e| {
+                e.stats.get(&feature).ok_or_else(|| Error::Dataset {
+                    path: root.into(),
+                    reason: format!("episode {} has no stats for {feature}", e.episode_index),
+                })
+            })
+            .collect::<Result<_>>()?;
+        let dim = per[0].mean.len();
+        let depth = if per[0].image { 3 } else { 1 };
+        let stat = |pick: &dyn Fn(&Stats) -> &Vec<f64>| {
+            col::nested_lists(
+                col::f64s(per.iter().flat_map(|p| pick(p).iter().copied())),
+                n,
+                dim,
+                depth,
+            )
+        };
+        let ints = |pick: &dyn Fn(&Stats) -> &Vec<f64>| {
+            col::nested_lists(
+                col::i64s(per.iter().flat_map(|p| pick(p).iter().map(|&v| v as i64))),
+                n,
+                dim,
+                1,
+            )
+        };
+        if per[0].integer {
+            cols.push((format!("stats/{feature}/min"), ints(&|p| &p.min)));
+            cols.push((format!("stats/{feature}/max"), ints(&|p| &p.max)));
+        } else {
+            cols.push((format!("stats/{feature}/min"), stat(&|p| &p.min)));
+            cols.push((format!("stats/{feature}/max"), stat(&|p| &p.max)));
+        }
+        cols.push((format!("stats/{feature}/mean"), stat(&|p| &p.mean)));
+        cols.push((format!("stats/{feature}/std"), stat(&|p| &p.std)));
+        cols.push((
+            format!("stats/{feature}/count"),
+            col::nested_lists(col::i64s(per.iter().map(|p| p.count as i64)), n, 1, 1),
+        ));
+        for (k, (_, name)) in QUANTILES.iter().enumerate() {
+            cols.push((
+                format!("stats/{feature}/{name}"),
+                stat(&|p| &p.quantiles[k]),
+            ));
+        }
+    }
+    cols.push((
+        "meta/episodes/chunk_index".into(),
+        col::i64s(std::iter::repeat_n(0, n)),
+    ));
+    cols.push((
+        "meta/episodes/file_index".into(),
+        col::i64s(std::iter::repeat_n(0, n)),
+    ));
+    cols.push((
+        "scaledp/source".into(),
+        col::strings(eps.iter().map(|e| e.source.as_str())),
+    ));
+    cols.push((
+        "scaledp/source_blake3".into(),
+        col::strings(eps.iter().map(|e| e.source_hash.as_str())),
+    ));
+    cols.push((
+        "scaledp/max_camera_skew_s".into(),
+        col::f64s(eps.iter().map(|e| e.report.max_camera_skew_s)),
+    ));
+    cols.push((
+        "scaledp/invalid_ticks".into(),
+        u(|e| e.report.invalid as u64),
+    ));
+    cols.push((
+        "scaledp/dropped_frames".into(),
+        u(|e| e.report.streams.iter().map(|r| r.dropped).sum()),
+    ));
+    let batch = col::batch(cols, vec![])?;
+    write_parquet(
+        &root.join("meta/episodes/chunk-000/file-000.parquet"),
+        &[batch],
+    )
+    .map(drop)
+}

@@ -1,0 +1,467 @@
+//! A LeRobot v3.0 dataset that grows one episode at a time and is valid after every episode.
+//!
+//! Commit order for an episode: its rows go into the open data file (rewritten whole as
+//! `*.tmp`, synced, renamed over the old one), then `meta/scaledp.json` (the authoritative
+//! record), then the LeRobot meta files, each by atomic rename. A job killed between two of
+//! these steps leaves a data file with rows the record does not list: `open` finds and removes
+//! them (and any orphan or temporary file), so the next run starts from a consistent dataset.
+//! A data file is closed once it reaches the size target; the next episode starts a new one.
+
+mod columns;
+mod meta;
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use arrow_array::{ArrayRef, RecordBatch};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+
+pub use meta::{data_path, EpisodeRecord, Sidecar};
+
+use crate::episode::Episode;
+use crate::error::{Error, Result};
+use crate::stats::Stats;
+
+/// The open data file and the episodes (row groups) it holds.
+struct Tail {
+    file: u64,
+    batches: Vec<RecordBatch>,
+}
+
+/// A dataset being written.
+pub struct Dataset {
+    root: PathBuf,
+    sidecar: Option<Sidecar>,
+    tail: Option<Tail>,
+    file_size_mb: u64,
+}
+
+fn derr(path: &Path, e: impl std::fmt::Display) -> Error {
+    Error::Dataset {
+        path: path.into(),
+        reason: e.to_string(),
+    }
+}
+
+/// Reads row group `group` of a data file.
+fn read_row_group(path: &Path, group: usize) -> Result<RecordBatch> {
+    let file = File::open(path).map_err(Error::io(path))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| derr(path, e))?
+        .with_row_groups(vec![group])
+        .with_batch_size(1 << 20)
+        .build()
+        .map_err(|e| derr(path, e))?;
+    let batches: Vec<RecordBatch> = reader
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| derr(path, e))?;
+    let schema = batches
+        .first()
+        .map(RecordBatch::schema)
+        .ok_or_else(|| derr(path, format!("row group {group} is empty")))?;
+    arrow_select_concat(&schema, &batches).map_err(|e| derr(path, e))
+}
+
+fn arrow_select_concat(
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
+) -> std::result::Result<RecordBatch, String> {
+    if batches.len() == 1 {
+        return Ok(batches[0].clone());
+    }
+    Err(format!(
+        "row group read as {} batches for {} columns; expected one",
+        batches.len(),
+        schema.fields().len()
+    ))
+}
+
+fn num_rows(path: &Path) -> Result<(u64, usize)> {
+    let file = File::open(path).map_err(Error::io(path))?;
+    let b = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| derr(path, e))?;
+    let md = b.metadata();
+    Ok((md.file_metadata().num_rows() as u64, md.num_row_groups()))
+}
+
+impl Dataset {
+    /// Opens the dataset at `root` (creating it if absent; emptied first with `overwrite`),
+    /// repairing what a killed job may have left.
+    pub fn open(root: &Path, overwrite: bool, file_size_mb: u64) -> Result<Self> {
+        if overwrite && root.exists() {
+            for sub in ["data", "meta"] {
+                let p = root.join(sub);
+                if p.exists() {
+                    std::fs::remove_dir_all(&p).map_err(Error::io(&p))?;
+                }
+            }
+        }
+        std::fs::create_dir_all(root).map_err(Error::io(root))?;
+        let record = root.join("meta/scaledp.json");
+        let sidecar: Option<Sidecar> = if record.exists() {
+            let text = std::fs::read(&record).map_err(Error::io(&record))?;
+            Some(
+                serde_json::from_slice(&text)
+                    .map_err(|e| derr(&record, format!("unreadable: {e}")))?,
+            )
+        } else if root.join("meta/info.json").exists() {
+            return Err(derr(
+                root,
+                "a LeRobot dataset not written by scaledp; convert into a new directory",
+            ));
+        } else {
+            None
+        };
+        let mut ds = Self {
+            root: root.into(),
+            sidecar,
+            tail: None,
+            file_size_mb,
+        };
+        ds.repair()?;
+        Ok(ds)
+    }
+
+    /// The dataset root.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Committed episodes.
+    pub fn episodes(&self) -> &[EpisodeRecord] {
+        self.sidecar.as_ref().map_or(&[], |s| &s.episodes)
+    }
+
+    /// The record, once an episode has been committed.
+    pub fn sidecar(&self) -> Option<&Sidecar> {
+        self.sidecar.as_ref()
+    }
+
+    /// True when an input with this BLAKE3 hash is already in the dataset.
+    pub fn contains(&self, source_hash: &str) -> bool {
+        self.episodes().iter().any(|e| e.source_hash == source_hash)
+    }
+
+    /// Removes temporary files, files no episode lists, and rows the record does not list.
+    fn repair(&mut self) -> Result<()> {
+        let mut listed: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
+        for e in self.episodes() {
+            listed.entry(e.data_file).or_default().push(e.length);
+        }
+        let data = self.root.join("data");
+        if data.exists() {
+            for chunk in std::fs::read_dir(&data)
+                .map_err(Error::io(&data))?
+                .flatten()
+            {
+                for f in std::fs::read_dir(chunk.path())
+                    .map_err(Error::io(chunk.path()))?
+                    .flatten()
+                {
+                    let p = f.path();
+                    let known = listed.keys().any(|&n| data_path(&self.root, n) == p);
+                    if !known {
+                        tracing::warn!(
+                            "{}: not part of the dataset (left by a killed job); removed",
+                            p.display()
+                        );
+                        std::fs::remove_file(&p).map_err(Error::io(&p))?;
+                    }
+                }
+            }
+        }
+        for (&file, lengths) in &listed {
+            let path = data_path(&self.root, file);
+            let (rows, groups) = num_rows(&path)?;
+            let want: u64 = lengths.iter().sum();
+            if rows == want && groups == lengths.len() {
+                continue;
+            }
+            if groups < lengths.len() {
+                return Err(derr(
+                    &path,
+                    format!(
+                        "holds {groups} episodes but the record lists {}",
+                        lengths.len()
+                    ),
+                ));
+            }
+            tracing::warn!(
+                "{}: dropping rows of an episode that was never committed",
+                path.display()
+            );
+            let keep: Vec<RecordBatch> = (0..lengths.len())
+                .map(|g| read_row_group(&path, g))
+                .collect::<Result<_>>()?;
+            columns::write_parquet(&path, &keep)?;
+        }
+        if let Some(s) = &self.sidecar {
+            meta::write_all(&self.root, s, self.file_size_mb)?;
+        }
+        for dir in [
+            self.root.join("meta"),
+            self.root.join("meta/episodes/chunk-000"),
+        ] {
+            for f in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+                if f.path().extension().is_some_and(|e| e == "tmp") {
+                    let _ = std::fs::remove_file(f.path());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn check_layout(&self, ep: &Episode) -> Result<()> {
+        let Some(s) = &self.sidecar else {
+            return Ok(());
+        };
+        let cams: Vec<String> = ep.cameras.iter().map(|c| c.name.clone()).collect();
+        let mismatch = if s.cameras != cams {
+            Some(format!("cameras {cams:?}, the dataset has {:?}", s.cameras))
+        } else if s.state_names != ep.state_names {
+            Some(format!(
+                "state {:?}, the dataset has {:?}",
+                ep.state_names, s.state_names
+            ))
+        } else if s.joint_names != ep.joint_names {
+            Some(format!(
+                "joints {:?}, the dataset has {:?}",
+                ep.joint_names, s.joint_names
+            ))
+        } else if (s.fps - ep.fps).abs() > 1e-9 || s.image_size != ep.image_size {
+            Some(format!(
+                "{} fps {:?} images, the dataset has {} fps {:?}",
+                ep.fps, ep.image_size, s.fps, s.image_size
+            ))
+        } else {
+            None
+        };
+        match mismatch {
+            Some(m) => Err(Error::Rejected {
+                path: ep.source.clone(),
+                reason: format!("does not fit the dataset: {m}"),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Appends a converted episode and commits it.
+    pub fn add(&mut self, ep: &Episode, source_hash: &str) -> Result<EpisodeRecord> {
+        self.check_layout(ep)?;
+        if self.sidecar.is_none() {
+            self.sidecar = Some(Sidecar {
+                format: 1,
+                fps: ep.fps,
+                robot_type: ep.rig.name.clone(),
+                rig: toml::to_string(&ep.rig).unwrap_or_default(),
+                image_size: ep.image_size,
+                cameras: ep.cameras.iter().map(|c| c.name.clone()).collect(),
+                state_names: ep.state_names.clone(),
+                joint_names: ep.joint_names.clone(),
+                tasks: vec![],
+                episodes: vec![],
+                converter_version: env!("CARGO_PKG_VERSION").into(),
+            });
+        }
+        let n = ep.len();
+        let mut cols: Vec<(String, ArrayRef)> = ep
+            .cameras
+            .iter()
+            .map(|c| {
+                (
+                    format!("observation.images.{}", c.name),
+                    columns::images(&c.jpeg),
+                )
+            })
+            .collect();
+        let dim = ep.state_names.len();
+        cols.push((
+            "observation.state".into(),
+            columns::fixed_f32(&ep.state, dim),
+        ));
+        cols.push(("action".into(), columns::fixed_f32(&ep.action, dim)));
+        cols.push((
+            "observation.joints".into(),
+            columns::fixed_f32(&ep.joints, ep.joint_names.len()),
+        ));
+        cols.push(("timestamp".into(), columns::f32s(&ep.timestamps)));
+        cols.push(("frame_index".into(), columns::i64s(0..n as i64)));
+        let mut stats = BTreeMap::new();
+        let f64v = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+        stats.insert(
+            "observation.state".to_string(),
+            Stats::of_rows(&f64v(&ep.state), dim),
+        );
+        stats.insert("action".into(), Stats::of_rows(&f64v(&ep.action), dim));
+        stats.insert(
+            "observation.joints".into(),
+            Stats::of_rows(&f64v(&ep.joints), ep.joint_names.len()),
+        );
+        stats.insert("timestamp".into(), Stats::of_rows(&f64v(&ep.timestamps), 1));
+        stats.insert(
+            "frame_index".into(),
+            Stats::of_integers(&(0..n as i64).collect::<Vec<_>>()),
+        );
+        for c in &ep.cameras {
+            stats.insert(
+                format!("observation.images.{}", c.name),
+                Stats::of_image(&c.histogram),
+            );
+        }
+        let source = ep.source.display().to_string();
+        self.commit(
+            cols,
+            n,
+            &ep.task,
+            stats,
+            source,
+            source_hash.into(),
+            ep.report.clone(),
+            ep.time_source.clone(),
+        )
+    }
+
+    /// Appends one episode of another scaledp dataset (for `merge`), re-indexed.
+    pub fn add_from(
+        &mut self,
+        other: &Path,
+        o: &Sidecar,
+        rec: &EpisodeRecord,
+    ) -> Result<EpisodeRecord> {
+        match &self.sidecar {
+            None => {
+                let mut s = o.clone();
+                s.tasks.clear();
+                s.episodes.clear();
+                self.sidecar = Some(s);
+            }
+            Some(s)
+                if s.cameras != o.cameras
+                    || s.state_names != o.state_names
+                    || s.joint_names != o.joint_names
+                    || s.image_size != o.image_size
+                    || (s.fps - o.fps).abs() > 1e-9 =>
+            {
+                return Err(derr(other, "its features differ from the merged dataset's"));
+            }
+            Some(_) => {}
+        }
+        let path = data_path(other, rec.data_file);
+        let group = o
+            .episodes
+            .iter()
+            .filter(|e| e.data_file == rec.data_file)
+            .position(|e| e.episode_index == rec.episode_index)
+            .unwrap_or(0);
+        let batch = read_row_group(&path, group)?;
+        let keep = ["episode_index", "index", "task_index"];
+        let cols: Vec<(String, ArrayRef)> = batch
+            .schema()
+            .fields()
+            .iter()
+            .zip(batch.columns())
+            .filter(|(f, _)| !keep.contains(&f.name().as_str()))
+            .map(|(f, a)| (f.name().clone(), a.clone()))
+            .collect();
+        let mut stats = rec.stats.clone();
+        for k in keep {
+            stats.remove(k);
+        }
+        let task = &o.tasks[rec.task_index as usize];
+        let frames = batch.num_rows();
+        self.commit(
+            cols,
+            frames,
+            task,
+            stats,
+            rec.source.clone(),
+            rec.source_hash.clone(),
+            rec.report.clone(),
+            rec.time_source.clone(),
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn commit(
+        &mut self,
+        mut cols: Vec<(String, ArrayRef)>,
+        n: usize,
+        task: &str,
+        mut stats: BTreeMap<String, Stats>,
+        source: String,
+        source_hash: String,
+        report: crate::align::AlignmentReport,
+        time_source: String,
+    ) -> Result<EpisodeRecord> {
+        let s = self
+            .sidecar
+            .as_mut()
+            .ok_or_else(|| derr(&self.root, "no layout"))?;
+        let task_index = match s.tasks.iter().position(|t| t == task) {
+            Some(i) => i,
+            None => {
+                s.tasks.push(task.into());
+                s.tasks.len() - 1
+            }
+        } as u64;
+        let episode_index = s.episodes.len() as u64;
+        let from = s.episodes.last().map_or(0, |e| e.to_index);
+        let to = from + n as u64;
+        stats.insert(
+            "episode_index".into(),
+            Stats::of_integers(&vec![episode_index as i64; n]),
+        );
+        stats.insert(
+            "index".into(),
+            Stats::of_integers(&(from as i64..to as i64).collect::<Vec<_>>()),
+        );
+        stats.insert(
+            "task_index".into(),
+            Stats::of_integers(&vec![task_index as i64; n]),
+        );
+        cols.push((
+            "episode_index".into(),
+            columns::i64s(std::iter::repeat_n(episode_index as i64, n)),
+        ));
+        cols.push(("index".into(), columns::i64s(from as i64..to as i64)));
+        cols.push((
+            "task_index".into(),
+            columns::i64s(std::iter::repeat_n(task_index as i64, n)),
+        ));
+        let hf = meta::huggingface_metadata(s);
+        let batch = columns::batch(cols, vec![("huggingface".into(), hf)])?;
+
+        let next_file = s
+            .episodes
+            .iter()
+            .map(|e| e.data_file + 1)
+            .max()
+            .unwrap_or(0);
+        let tail = self.tail.get_or_insert(Tail {
+            file: next_file,
+            batches: vec![],
+        });
+        tail.batches.push(batch);
+        let path = data_path(&self.root, tail.file);
+        let size = columns::write_parquet(&path, &tail.batches)?;
+        let record = EpisodeRecord {
+            episode_index,
+            length: n as u64,
+            task_index,
+            data_file: tail.file,
+            from_index: from,
+            to_index: to,
+            source,
+            source_hash,
+            stats,
+            report,
+            time_source,
+        };
+        if size >= self.file_size_mb << 20 {
+            self.tail = None;
+        }
+        s.episodes.push(record.clone());
+        meta::write_all(&self.root, s, self.file_size_mb)?;
+        Ok(record)
+    }
+}

@@ -1,0 +1,120 @@
+//! `scaledp convert` and `scaledp dataset merge`.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use anyhow::Result;
+use indicatif::{ProgressBar, ProgressStyle};
+use scaledp_converter::{ConvertOptions, JobOptions, Outcome, Progress};
+use scaledp_schema::Rig;
+
+use crate::cli::{ConvertArgs, ExitStatus};
+
+pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
+    let rig = args.rig.as_deref().map(Rig::load_or_builtin).transpose()?;
+    let inputs = scaledp_converter::collect_inputs(&args.inputs)?;
+    if inputs.is_empty() {
+        anyhow::bail!(
+            "no .mcap, .bag, .db3 or rosbag2 directory found in {:?}",
+            args.inputs
+        );
+    }
+    let opts = JobOptions {
+        convert: ConvertOptions {
+            rig,
+            fps: args.fps,
+            width: args.size.0,
+            height: args.size.1,
+            jpeg_quality: args.jpeg_quality,
+            stale_periods: args.stale_periods,
+            max_invalid_fraction: args.max_invalid,
+            task: args.task,
+            use_log_time: args.log_time,
+        },
+        overwrite: args.overwrite,
+        shard: args.shard,
+        jobs: args
+            .jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, usize::from)),
+        file_size_mb: args.file_size_mb,
+        include_failures: args.include_failures,
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let frames = AtomicU64::new(0);
+    let start = Instant::now();
+    let results = scaledp_converter::run(&inputs, &args.out, &opts, &|p| match p {
+        Progress::Total(n) => bar.set_length(n as u64),
+        Progress::Done {
+            outcome, frames: f, ..
+        } => {
+            if let Outcome::Failed(line) = &outcome {
+                bar.suspend(|| eprintln!("error: {line}"));
+            }
+            let total = frames.fetch_add(f as u64, Ordering::Relaxed) + f as u64;
+            bar.set_message(format!(
+                "{total} frames, {:.0} frames/s",
+                total as f64 / start.elapsed().as_secs_f64()
+            ));
+            bar.inc(1);
+        }
+    })?;
+    bar.finish_and_clear();
+    summarize(&results, &args.out, start.elapsed().as_secs_f64())
+}
+
+fn summarize(results: &[(PathBuf, Outcome)], out: &Path, seconds: f64) -> Result<ExitStatus> {
+    let (mut converted, mut frames, mut skipped, mut failed) = (0, 0, 0, Vec::new());
+    for (path, o) in results {
+        match o {
+            Outcome::Converted(rec) => {
+                converted += 1;
+                frames += rec.length;
+                let dropped: u64 = rec.report.streams.iter().map(|s| s.dropped).sum();
+                println!(
+                    "episode {:>4}  {:>5} frames  skew {:>5.1} ms  invalid {:>3}  dropped {:>3}  {}",
+                    rec.episode_index,
+                    rec.length,
+                    rec.report.max_camera_skew_s * 1e3,
+                    rec.report.invalid,
+                    dropped,
+                    path.display()
+                );
+            }
+            Outcome::Skipped(why) => {
+                skipped += 1;
+                eprintln!("skipped {}: {why}", path.display());
+            }
+            Outcome::Failed(line) => failed.push(line.clone()),
+        }
+    }
+    println!(
+        "{converted} converted ({frames} frames, {:.0} frames/s), {skipped} skipped, {} failed → {}",
+        frames as f64 / seconds.max(1e-9),
+        failed.len(),
+        out.display()
+    );
+    for line in &failed {
+        println!("failed: {line}");
+    }
+    Ok(if failed.is_empty() {
+        ExitStatus::Success
+    } else {
+        ExitStatus::DataLost
+    })
+}
+
+pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mb: u64) -> Result<ExitStatus> {
+    let n = scaledp_converter::merge(inputs, out, file_size_mb)?;
+    println!(
+        "{n} episodes from {} datasets → {}",
+        inputs.len(),
+        out.display()
+    );
+    Ok(ExitStatus::Success)
+}
