@@ -345,10 +345,8 @@ pub fn convert(
         (None, None) => crate::detect::detect(path, rec, opts.fps.unwrap_or(10.0))?,
     };
     let fps = opts.fps.unwrap_or(rig.control_rate_hz);
-    let task = opts
-        .task
-        .clone()
-        .or_else(|| crate::detect::task_from_metadata(rec))
+    let task = crate::detect::task_from_metadata(rec)
+        .or_else(|| opts.task.clone())
         .ok_or_else(|| Error::Rejected {
             path: path.into(),
             reason: "no task instruction: the recording stores none; pass --task".into(),

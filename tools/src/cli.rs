@@ -274,6 +274,33 @@ pub enum DatasetCommand {
 pub enum BenchCommand {
     /// Publish the reference load over loopback into a recorder process and report drops and CPU.
     Record(BenchRecordArgs),
+    /// Convert a fixed generated set of recordings and report frames/s, MB/s and peak memory,
+    /// against the usual single-process Python route.
+    Convert(BenchConvertArgs),
+}
+
+/// `scaledp bench convert`.
+#[derive(Debug, Args)]
+pub struct BenchConvertArgs {
+    /// Episodes generated and converted.
+    #[arg(long, default_value_t = 4)]
+    pub episodes: usize,
+    /// Seconds per episode.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Rig file, or the name of a shipped rig.
+    #[arg(long, default_value = "franka_2zed")]
+    pub rig: String,
+    /// Episodes converted at once (default: the number of cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Keep the generated recordings and the datasets here (default: a temporary directory,
+    /// removed afterwards).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Skip the Python baseline.
+    #[arg(long)]
+    pub no_python: bool,
 }
 
 /// `scaledp bench record`.

@@ -133,8 +133,30 @@ pub fn batch(
     })
 }
 
+/// Files written under temporary names, renamed into place together by [`Staged::commit`].
+#[derive(Debug, Default)]
+pub struct Staged(Vec<(std::path::PathBuf, std::path::PathBuf)>);
+
+impl Staged {
+    /// Renames every staged file into place, in staging order, back to back.
+    pub fn commit(self) -> Result<()> {
+        for (tmp, path) in self.0 {
+            std::fs::rename(&tmp, &path).map_err(Error::io(&path))?;
+        }
+        Ok(())
+    }
+}
+
 /// Writes batches (one row group each) to `path` via `path.tmp` and an atomic rename.
 pub fn write_parquet(path: &Path, batches: &[RecordBatch]) -> Result<u64> {
+    let mut staged = Staged::default();
+    let size = stage_parquet(path, batches, &mut staged)?;
+    staged.commit()?;
+    Ok(size)
+}
+
+/// Writes batches to `path.tmp` (synced) and stages the rename; returns the file size.
+pub fn stage_parquet(path: &Path, batches: &[RecordBatch], staged: &mut Staged) -> Result<u64> {
     let Some(first) = batches.first() else {
         return Err(Error::Dataset {
             path: path.into(),
@@ -161,12 +183,13 @@ pub fn write_parquet(path: &Path, batches: &[RecordBatch]) -> Result<u64> {
     let file = w.into_inner().map_err(err)?;
     file.sync_all().map_err(Error::io(&tmp))?;
     drop(file);
-    std::fs::rename(&tmp, path).map_err(Error::io(path))?;
-    Ok(std::fs::metadata(path).map_err(Error::io(path))?.len())
+    let size = std::fs::metadata(&tmp).map_err(Error::io(&tmp))?.len();
+    staged.0.push((tmp, path.to_path_buf()));
+    Ok(size)
 }
 
-/// Writes a file atomically (temporary file, sync, rename).
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+/// Writes `bytes` to `path.tmp` (synced) and stages the rename.
+pub fn stage(path: &Path, bytes: &[u8], staged: &mut Staged) -> Result<()> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(Error::io(dir))?;
     }
@@ -177,5 +200,6 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     File::open(&tmp)
         .and_then(|f| f.sync_all())
         .map_err(Error::io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(Error::io(path))
+    staged.0.push((tmp, path.to_path_buf()));
+    Ok(())
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::columns::{self as col, write_atomic, write_parquet};
+use super::columns::{self as col, stage, stage_parquet, Staged};
 use crate::align::AlignmentReport;
 use crate::error::{Error, Result};
 use crate::stats::{aggregate_all, Stats, QUANTILES};
@@ -159,12 +159,18 @@ fn fps_json(fps: f64) -> serde_json::Value {
     }
 }
 
-/// Rewrites every LeRobot meta file from the sidecar, each atomically, the sidecar first.
-pub fn write_all(root: &Path, s: &Sidecar, data_files_size_mb: u64) -> Result<()> {
+/// Stages every meta file made from the sidecar, the sidecar first (see [`Staged`]).
+pub fn stage_all(
+    root: &Path,
+    s: &Sidecar,
+    data_files_size_mb: u64,
+    staged: &mut Staged,
+) -> Result<()> {
     let json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
-    write_atomic(
+    stage(
         &root.join("meta/scaledp.json"),
         &serde_json::to_vec_pretty(s).unwrap_or_default(),
+        staged,
     )?;
     let total_frames: u64 = s.episodes.iter().map(|e| e.length).sum();
     let info = serde_json::json!({
@@ -192,26 +198,27 @@ pub fn write_all(root: &Path, s: &Sidecar, data_files_size_mb: u64) -> Result<()
             "sources": s.episodes.iter().map(|e| serde_json::json!({"episode_index": e.episode_index, "source": e.source, "blake3": e.source_hash})).collect::<Vec<_>>(),
         },
     });
-    write_atomic(&root.join("meta/info.json"), &json(&info))?;
+    stage(&root.join("meta/info.json"), &json(&info), staged)?;
     let agg = aggregate_all(s.episodes.iter().map(|e| &e.stats));
     let stats: serde_json::Map<String, serde_json::Value> = agg
         .iter()
         .map(|(k, v)| (k.clone(), v.to_lerobot_json()))
         .collect();
-    write_atomic(
+    stage(
         &root.join("meta/stats.json"),
         &json(&serde_json::Value::Object(stats)),
+        staged,
     )?;
-    write_tasks(root, &s.tasks)?;
+    write_tasks(root, &s.tasks, staged)?;
     if !s.episodes.is_empty() {
-        write_episodes(root, s)?;
+        write_episodes(root, s, staged)?;
     }
     Ok(())
 }
 
 const PANDAS_TASKS: &str = r#"{"index_columns": ["__index_level_0__"], "column_indexes": [{"name": null, "field_name": null, "pandas_type": "unicode", "numpy_type": "str", "metadata": {"encoding": "UTF-8"}}], "columns": [{"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64", "metadata": null}, {"name": null, "field_name": "__index_level_0__", "pandas_type": "object", "numpy_type": "str", "metadata": null}], "attributes": {}, "creator": {"library": "pyarrow", "version": "26.0.1"}, "pandas_version": "3.1.1"}"#;
 
-fn write_tasks(root: &Path, tasks: &[String]) -> Result<()> {
+fn write_tasks(root: &Path, tasks: &[String], staged: &mut Staged) -> Result<()> {
     if tasks.is_empty() {
         return Ok(());
     }
@@ -225,10 +232,10 @@ fn write_tasks(root: &Path, tasks: &[String]) -> Result<()> {
         ],
         vec![("pandas".into(), PANDAS_TASKS.into())],
     )?;
-    write_parquet(&root.join("meta/tasks.parquet"), &[batch]).map(drop)
+    stage_parquet(&root.join("meta/tasks.parquet"), &[batch], staged).map(drop)
 }
 
-fn write_episodes(root: &Path, s: &Sidecar) -> Result<()> {
+fn write_episodes(root: &Path, s: &Sidecar, staged: &mut Staged) -> Result<()> {
     let eps = &s.episodes;
     let n = eps.len();
     let u = |f: fn(&EpisodeRecord) -> u64| col::i64s(eps.iter().map(move |e| f(e) as i64));
@@ -325,9 +332,10 @@ fn write_episodes(root: &Path, s: &Sidecar) -> Result<()> {
         u(|e| e.report.streams.iter().map(|r| r.dropped).sum()),
     ));
     let batch = col::batch(cols, vec![])?;
-    write_parquet(
+    stage_parquet(
         &root.join("meta/episodes/chunk-000/file-000.parquet"),
         &[batch],
+        staged,
     )
     .map(drop)
 }

@@ -1,10 +1,10 @@
 //! A LeRobot v3.0 dataset that grows one episode at a time and is valid after every episode.
 //!
-//! Commit order for an episode: its rows go into the open data file (rewritten whole as
-//! `*.tmp`, synced, renamed over the old one), then `meta/scaledp.json` (the authoritative
-//! record), then the LeRobot meta files, each by atomic rename. A job killed between two of
-//! these steps leaves a data file with rows the record does not list: `open` finds and removes
-//! them (and any orphan or temporary file), so the next run starts from a consistent dataset.
+//! Committing an episode first writes, under temporary names and synced, the open data file
+//! with the episode's rows added, `meta/scaledp.json` (the authoritative record) and every
+//! LeRobot meta file; then renames them into place back to back, data first. Only a kill inside
+//! that burst of renames (a few syscalls) can leave rows that no metadata lists; `open` finds
+//! and removes them (and any orphan or temporary file), so the next run starts consistent.
 //! A data file is closed once it reaches the size target; the next episode starts a new one.
 
 mod columns;
@@ -196,7 +196,9 @@ impl Dataset {
             columns::write_parquet(&path, &keep)?;
         }
         if let Some(s) = &self.sidecar {
-            meta::write_all(&self.root, s, self.file_size_mb)?;
+            let mut staged = columns::Staged::default();
+            meta::stage_all(&self.root, s, self.file_size_mb, &mut staged)?;
+            staged.commit()?;
         }
         for dir in [
             self.root.join("meta"),
@@ -443,7 +445,11 @@ impl Dataset {
         });
         tail.batches.push(batch);
         let path = data_path(&self.root, tail.file);
-        let size = columns::write_parquet(&path, &tail.batches)?;
+        // Everything is written under temporary names first; the renames then follow one
+        // another with nothing in between, so the window in which a kill leaves rows that no
+        // metadata lists is a few syscalls long (and `open` repairs even that).
+        let mut staged = columns::Staged::default();
+        let size = columns::stage_parquet(&path, &tail.batches, &mut staged)?;
         let record = EpisodeRecord {
             episode_index,
             length: n as u64,
@@ -461,7 +467,8 @@ impl Dataset {
             self.tail = None;
         }
         s.episodes.push(record.clone());
-        meta::write_all(&self.root, s, self.file_size_mb)?;
+        meta::stage_all(&self.root, s, self.file_size_mb, &mut staged)?;
+        staged.commit()?;
         Ok(record)
     }
 }

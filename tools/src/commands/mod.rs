@@ -1,6 +1,7 @@
 //! One module per subcommand; `dispatch` picks it.
 
 mod bench;
+mod bench_convert;
 mod convert;
 mod demo;
 mod record;
@@ -24,6 +25,7 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
             file_size_mb,
         }) => convert::merge(&inputs, &out, file_size_mb),
         Command::Bench(crate::cli::BenchCommand::Record(args)) => bench::record(args),
+        Command::Bench(crate::cli::BenchCommand::Convert(args)) => bench_convert::run(args),
         Command::Demo(args) => demo::run(args),
     }
 }

@@ -9,6 +9,7 @@
 
 pub mod render;
 pub mod scene;
+pub mod synth;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

@@ -1,0 +1,137 @@
+//! Recordings written straight to disk, faster than real time: the simulated scene rendered at
+//! the rig's rates with the same stamps, jitter and latency model as the live simulator, through
+//! the recorder's own episode writer. Benchmarks and tests use it for a fixed set of inputs.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::Result;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use scaledp_recorder::EpisodeOptions;
+use scaledp_schema::msg::{Header, Image, JointState, Time};
+use scaledp_schema::rig::Rig;
+use scaledp_schema::RosMessage;
+
+use super::render::{self, View};
+use super::scene::Scene;
+
+/// Changes one message before it is written: (topic, index within the topic, stamp in ns,
+/// payload). Tests use it to plant faults.
+pub type Mutate<'a> = dyn FnMut(&str, u64, &mut u64, &mut Vec<u8>) + 'a;
+
+/// Writes one episode of `seconds` of `rig` under `seed` to `path` (an `episode_*.mcap` like
+/// the recorder's, with `scaledp.episode` metadata naming `task`). Starts at `start_ns`.
+pub fn write_episode(
+    path: &Path,
+    rig: &Rig,
+    seed: u64,
+    seconds: f64,
+    start_ns: u64,
+    task: &str,
+    mutate: &mut Mutate<'_>,
+) -> Result<()> {
+    let scene = Scene::new(rig, seed);
+    let table_z = render::table_height(&scene);
+    let topics = rig.topics();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    // Plan (log time, topic, k, capture stamp) for every message, then render in log order so
+    // only one frame is in memory at a time.
+    let mut plan: Vec<(u64, usize, u64, u64)> = Vec::new();
+    for (ti, t) in topics.iter().enumerate() {
+        let period = 1e9 / t.rate_hz;
+        for k in 0..(seconds * t.rate_hz) as u64 {
+            let jitter = rng.random_range(-0.5e6..0.5e6) * if t.is_image { 1.0 } else { 0.04 };
+            let stamp = start_ns + (k as f64 * period + jitter).max(0.0) as u64;
+            let latency = if t.is_image {
+                rng.random_range(25e6..35e6)
+            } else {
+                rng.random_range(3e5..7e5)
+            } as u64;
+            plan.push((stamp + latency, ti, k, stamp));
+        }
+    }
+    plan.sort_unstable();
+    let views: Vec<Option<View>> = topics
+        .iter()
+        .map(|t| {
+            rig.cameras
+                .iter()
+                .position(|c| c.topic == t.topic)
+                .map(|ci| View::for_camera(&scene, &rig.cameras[ci], ci))
+        })
+        .collect();
+    let mut buf = Vec::new();
+    let mut message = |ti: usize, stamp: u64| -> Result<Vec<u8>> {
+        let t = &topics[ti];
+        let t_s = (stamp - start_ns) as f64 * 1e-9;
+        let state = scene.state_at(t_s);
+        let header = Header {
+            stamp: Time::from_ns(stamp),
+            frame_id: String::new(),
+        };
+        if let Some(view) = &views[ti] {
+            let cam = rig
+                .cameras
+                .iter()
+                .find(|c| c.topic == t.topic)
+                .ok_or_else(|| anyhow::anyhow!("camera"))?;
+            render::render(&scene, view, &state, cam.encoding(), table_z, &mut buf);
+            let channels = render::layout(cam.encoding()).map_or(3, |l| l.0) as u32;
+            let img = Image {
+                header,
+                height: cam.height,
+                width: cam.width,
+                encoding: cam.encoding().into(),
+                is_bigendian: 0,
+                step: cam.width * channels,
+                data: std::mem::take(&mut buf),
+            };
+            let out = img.to_cdr();
+            buf = img.data;
+            return Ok(out);
+        }
+        let (arm_i, arm) = rig
+            .arms
+            .iter()
+            .enumerate()
+            .find(|(_, a)| {
+                a.joint_state_topic == t.topic
+                    || a.gripper.as_ref().is_some_and(|g| g.topic == t.topic)
+            })
+            .ok_or_else(|| anyhow::anyhow!("topic {} belongs to no arm", t.topic))?;
+        let (name, position) = match &arm.gripper {
+            Some(g) if g.topic == t.topic => (
+                g.joint_names.clone(),
+                g.model
+                    .positions_for_width(state.arms[arm_i].gripper_width_m, g.joint_names.len()),
+            ),
+            _ => (arm.joint_names.clone(), state.arms[arm_i].q.clone()),
+        };
+        let n = name.len();
+        Ok(JointState {
+            header,
+            name,
+            position,
+            velocity: vec![0.0; n],
+            effort: vec![],
+        }
+        .to_cdr())
+    };
+    let meta = BTreeMap::from([
+        ("task".to_string(), task.to_string()),
+        ("rig".to_string(), toml::to_string(rig)?),
+        ("rig_name".to_string(), rig.name.clone()),
+        ("outcome".to_string(), "success".to_string()),
+        ("synthetic".to_string(), format!("seed {seed}")),
+    ]);
+    let mut w = EpisodeOptions::new().create(path, &topics, meta.clone())?;
+    for (log_time, ti, k, stamp) in plan {
+        let mut payload = message(ti, stamp)?;
+        let mut stamp = stamp;
+        mutate(&topics[ti].topic, k, &mut stamp, &mut payload);
+        w.write(ti, log_time, stamp, &payload)?;
+    }
+    w.finish(meta, None)?;
+    Ok(())
+}
