@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use crate::episode::{convert, ConvertOptions, Episode};
 use crate::error::{Error, Result};
+use crate::frames::FrameStore;
 use crate::lerobot::{Dataset, EpisodeRecord};
 use crate::source::{Recording, TopicInfo};
 
@@ -29,6 +30,8 @@ pub struct JobOptions {
     pub file_size_mb: u64,
     /// Also convert episodes whose recorded outcome is `failure`.
     pub include_failures: bool,
+    /// Split an input into several episodes wherever no message was logged for this long (s).
+    pub split_gap_s: Option<f64>,
 }
 
 impl Default for JobOptions {
@@ -40,6 +43,7 @@ impl Default for JobOptions {
             jobs: std::thread::available_parallelism().map_or(2, usize::from),
             file_size_mb: 100,
             include_failures: false,
+            split_gap_s: None,
         }
     }
 }
@@ -47,8 +51,8 @@ impl Default for JobOptions {
 /// What happened to one input.
 #[derive(Debug, Clone)]
 pub enum Outcome {
-    /// Converted and committed.
-    Converted(Box<EpisodeRecord>),
+    /// Converted and committed (several episodes when the input was split on time gaps).
+    Converted(Vec<EpisodeRecord>),
     /// Already in the dataset (same content hash), or excluded by its recorded outcome.
     Skipped(String),
     /// Could not be converted: one line naming the file and the reason.
@@ -196,16 +200,86 @@ pub fn read_input(path: &Path) -> Result<Recording> {
     }
 }
 
-fn convert_one(path: &Path, opts: &JobOptions) -> std::result::Result<Episode, Outcome> {
+/// Log-time windows `[start, end)` separated by gaps longer than `gap_s` (one window, all of
+/// the input, without a gap setting).
+fn windows(
+    rec: &Recording,
+    frames: &dyn FrameStore,
+    gap_s: Option<f64>,
+) -> Vec<Option<(u64, u64)>> {
+    let Some(gap_s) = gap_s else {
+        return vec![None];
+    };
+    let mut times: Vec<u64> = rec.messages.iter().map(|m| m.log_time_ns).collect();
+    for t in &rec.topics {
+        times.extend(frames.stamps(&t.topic).into_iter().map(|(_, log)| log));
+    }
+    times.sort_unstable();
+    times.dedup();
+    let (Some(&first), Some(&last)) = (times.first(), times.last()) else {
+        return vec![None];
+    };
+    let gap_ns = (gap_s * 1e9) as u64;
+    let mut out = Vec::new();
+    let mut start = first;
+    for w in times.windows(2) {
+        if w[1] - w[0] > gap_ns {
+            out.push(Some((start, w[0] + 1)));
+            start = w[1];
+        }
+    }
+    out.push(Some((start, last + 1)));
+    out
+}
+
+type Converted = std::result::Result<Vec<Episode>, Outcome>;
+
+/// True when the input with content hash `h` is in the dataset whole: as one episode, or as
+/// every part `h#k/n` of a split.
+fn fully_converted(existing: &[String], h: &str) -> bool {
+    if existing.iter().any(|e| e == h) {
+        return true;
+    }
+    let prefix = format!("{h}#");
+    let parts: Vec<&str> = existing
+        .iter()
+        .filter_map(|e| e.strip_prefix(&prefix))
+        .collect();
+    let n = parts
+        .first()
+        .and_then(|p| p.split_once('/'))
+        .and_then(|(_, n)| n.parse::<usize>().ok());
+    n.is_some_and(|n| (0..n).all(|k| parts.contains(&format!("{k}/{n}").as_str())))
+}
+
+fn convert_one(path: &Path, opts: &JobOptions) -> Converted {
     let failed = |e: Error| Outcome::Failed(e.to_string());
+    let run = |rec: &Recording, frames: &dyn FrameStore| -> Converted {
+        check_outcome(rec, opts)?;
+        let parts = windows(rec, frames, opts.split_gap_s);
+        let split = parts.len() > 1;
+        let mut episodes = Vec::with_capacity(parts.len());
+        for (k, window) in parts.into_iter().enumerate() {
+            let copts = ConvertOptions {
+                window_ns: window,
+                ..opts.convert.clone()
+            };
+            let mut ep = convert(path, rec, frames, &copts).map_err(failed)?;
+            if split {
+                let mut name = ep.source.into_os_string();
+                name.push(format!("#{k}"));
+                ep.source = name.into();
+            }
+            episodes.push(ep);
+        }
+        Ok(episodes)
+    };
     if path.is_file() && path.extension().is_some_and(|e| e == "mcap") {
         let (rec, frames) = crate::frames::read_mcap_light(path, &useful_topic).map_err(failed)?;
-        check_outcome(&rec, opts)?;
-        return convert(path, &rec, &frames, &opts.convert).map_err(failed);
+        return run(&rec, &frames);
     }
     let rec = read_input(path).map_err(failed)?;
-    check_outcome(&rec, opts)?;
-    convert(path, &rec, &crate::frames::InMemory(&rec), &opts.convert).map_err(failed)
+    run(&rec, &crate::frames::InMemory(&rec))
 }
 
 /// Skips episodes the operator marked as discarded or failed.
@@ -250,7 +324,7 @@ pub fn run(
         .num_threads(opts.jobs.max(1))
         .build()
         .map_err(|e| Error::input(out, format!("thread pool: {e}")))?;
-    let (tx, rx) = mpsc::channel::<(usize, String, std::result::Result<Episode, Outcome>)>();
+    let (tx, rx) = mpsc::channel::<(usize, String, Converted)>();
     let mut results: BTreeMap<usize, (PathBuf, Outcome)> = BTreeMap::new();
     std::thread::scope(|scope| -> Result<()> {
         let inputs_ref = &inputs;
@@ -268,7 +342,7 @@ pub fn run(
                         let hash = content_hash(path);
                         let r = match &hash {
                             Err(e) => Err(Outcome::Failed(e.to_string())),
-                            Ok(h) if existing.contains(h) => {
+                            Ok(h) if fully_converted(&existing, h) => {
                                 Err(Outcome::Skipped("already in the dataset".into()))
                             }
                             Ok(_) => convert_one(path, opts),
@@ -278,19 +352,44 @@ pub fn run(
             })
         });
         // Commit in input order: hold finished episodes until all before them are done.
-        let mut pending: BTreeMap<usize, (String, std::result::Result<Episode, Outcome>)> =
-            BTreeMap::new();
+        let mut pending: BTreeMap<usize, (String, Converted)> = BTreeMap::new();
         let mut next = 0;
         for (i, hash, r) in rx {
             pending.insert(i, (hash, r));
             while let Some((hash, r)) = pending.remove(&next) {
                 let path = inputs[next].clone();
                 let (outcome, frames) = match r {
-                    Ok(ep) => match dataset.add(&ep, &hash) {
-                        Ok(rec) => (Outcome::Converted(Box::new(rec)), ep.len()),
-                        Err(e @ Error::Rejected { .. }) => (Outcome::Failed(e.to_string()), 0),
-                        Err(e) => return Err(e),
-                    },
+                    Ok(episodes) => {
+                        let n = episodes.len();
+                        let mut records = Vec::with_capacity(n);
+                        let mut frames = 0;
+                        let mut failure = None;
+                        for (k, ep) in episodes.iter().enumerate() {
+                            let part_hash = if n > 1 {
+                                format!("{hash}#{k}/{n}")
+                            } else {
+                                hash.clone()
+                            };
+                            if dataset.contains(&part_hash) {
+                                continue; // committed before an interrupted run stopped
+                            }
+                            match dataset.add(ep, &part_hash) {
+                                Ok(rec) => {
+                                    frames += ep.len();
+                                    records.push(rec);
+                                }
+                                Err(e @ Error::Rejected { .. }) => {
+                                    failure = Some(e.to_string());
+                                    break;
+                                }
+                                Err(e) => return Err(e),
+                            }
+                        }
+                        match failure {
+                            Some(line) => (Outcome::Failed(line), frames),
+                            None => (Outcome::Converted(records), frames),
+                        }
+                    }
                     Err(o) => (o, 0),
                 };
                 progress(Progress::Done {

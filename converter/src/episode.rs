@@ -46,6 +46,8 @@ pub struct ConvertOptions {
     pub task: Option<String>,
     /// Align on log (receive) times instead of header stamps.
     pub use_log_time: bool,
+    /// Convert only messages logged in `[start, end)` (ns): one part of a split recording.
+    pub window_ns: Option<(u64, u64)>,
 }
 
 impl Default for ConvertOptions {
@@ -60,6 +62,7 @@ impl Default for ConvertOptions {
             max_invalid_fraction: 0.05,
             task: None,
             use_log_time: false,
+            window_ns: None,
         }
     }
 }
@@ -352,7 +355,15 @@ pub fn convert(
             reason: "no task instruction: the recording stores none; pass --task".into(),
         })?;
     let by_topic = |topic: &str| -> Vec<&RawMessage> {
-        rec.messages.iter().filter(|m| m.topic == topic).collect()
+        rec.messages
+            .iter()
+            .filter(|m| {
+                m.topic == topic
+                    && opts
+                        .window_ns
+                        .is_none_or(|(a, b)| (a..b).contains(&m.log_time_ns))
+            })
+            .collect()
     };
     let reject = |reason: String| Error::Rejected {
         path: path.into(),
@@ -360,19 +371,27 @@ pub fn convert(
     };
 
     // Cameras: stamps only; pixels later, for the frames chosen.
+    let in_window = |log_ns: u64| opts.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns));
     let mut cam_streams = Vec::new();
+    // Per camera: stored ordinal of each frame kept (all of them unless a window is set).
+    let mut cam_ordinals: Vec<Vec<usize>> = Vec::new();
     for c in &rig.cameras {
-        let stamps: Vec<u64> = frames
+        let (ordinals, stamps): (Vec<usize>, Vec<u64>) = frames
             .stamps(&c.topic)
             .into_iter()
-            .map(|(header, log)| {
-                if opts.use_log_time || header == 0 {
-                    log
-                } else {
-                    header
-                }
+            .enumerate()
+            .filter(|(_, (_, log))| in_window(*log))
+            .map(|(i, (header, log))| {
+                (
+                    i,
+                    if opts.use_log_time || header == 0 {
+                        log
+                    } else {
+                        header
+                    },
+                )
             })
-            .collect();
+            .unzip();
         if stamps.is_empty() {
             return Err(reject(format!(
                 "camera '{}' ({}) has no messages",
@@ -381,6 +400,7 @@ pub fn convert(
         }
         check_monotonic(path, &c.topic, &stamps)?;
         cam_streams.push(Stream::new(&c.topic, stamps, Some(c.fps)));
+        cam_ordinals.push(ordinals);
     }
     // Arms, grippers and command topics.
     let mut series = Vec::new();
@@ -503,10 +523,11 @@ pub fn convert(
     let (w, h) = (opts.width, opts.height);
     let mut wanted: BTreeMap<String, BTreeSet<usize>> = BTreeMap::new();
     for (ci, cam) in rig.cameras.iter().enumerate() {
-        wanted
-            .entry(cam.topic.clone())
-            .or_default()
-            .extend(aligned.frames[..frames].iter().map(|f| f[ci]));
+        wanted.entry(cam.topic.clone()).or_default().extend(
+            aligned.frames[..frames]
+                .iter()
+                .map(|f| cam_ordinals[ci][f[ci]]),
+        );
     }
     let mut done: HashMap<FrameKey, Encoded> = HashMap::new();
     let mut batch: Vec<(usize, RawMessage)> = Vec::with_capacity(FRAME_BATCH);
@@ -550,10 +571,11 @@ pub fn convert(
         let mut histogram = ChannelHistogram::default();
         let mut jpeg = Vec::with_capacity(frames);
         for f in &aligned.frames[..frames] {
-            let (bytes, hist) = done.get(&(cam.topic.clone(), f[ci])).ok_or_else(|| {
+            let ordinal = cam_ordinals[ci][f[ci]];
+            let (bytes, hist) = done.get(&(cam.topic.clone(), ordinal)).ok_or_else(|| {
                 reject(format!(
                     "frame {} of {} was not found on the second read",
-                    f[ci], cam.topic
+                    ordinal, cam.topic
                 ))
             })?;
             histogram.absorb(hist);

@@ -4,11 +4,12 @@ as a baseline for `scaledp bench convert`.
 usage: convert_baseline.py RECORDINGS_DIR OUT_DIR
 
 Per episode (`*.mcap` in RECORDINGS_DIR, sorted): `rosbags.highlevel.AnyReader` reads it; a
-first pass collects header stamps of every stream and all joint positions; ticks at 10 Hz run
-from the latest first stamp to the earliest last stamp; each camera gives its latest frame at or
-before the tick, joint positions are linearly interpolated (numpy). A second pass decodes only
-the chosen frames: bgra8/rgb8 → RGB (numpy), `Image.resize((320, 240), LANCZOS)`, JPEG q90
-(Pillow). One parquet per episode (pyarrow). Prints {"frames": N, "seconds": S}.
+single pass in log order; ticks at 10 Hz run from the latest first header stamp to the earliest
+last one; each camera gives its latest frame at or before the tick (a frame is decoded once the
+next frame of its camera shows which ticks it covers, so only the chosen frames are decoded and
+only JPEGs are kept): bgra8/rgb8 → RGB (numpy), `Image.resize((320, 240), LANCZOS)`, JPEG q90
+(Pillow); joint positions are linearly interpolated (numpy). One parquet per episode (pyarrow).
+Prints {"frames": N, "seconds": S}.
 """
 import io
 import json
@@ -54,46 +55,66 @@ def jpeg(rgb):
 
 
 def convert(path, out_dir, episode_index, index0, typestore):
+    step = 1e9 / FPS
     with AnyReader([path], default_typestore=typestore) as reader:
         cams = sorted((c for c in reader.connections if c.msgtype == IMAGE), key=lambda c: c.topic)
         joints = sorted((c for c in reader.connections if c.msgtype == JOINTS), key=lambda c: c.topic)
-        cam_stamps = {c.topic: [] for c in cams}
+        topics = [c.topic for c in cams + joints]
+        first, last = {}, {}
         joint_t = {c.topic: [] for c in joints}
         joint_q = {c.topic: [] for c in joints}
-        # Pass 1: stamps and joint positions.
+        pending = {c.topic: [] for c in cams}  # frames seen before every stream has started
+        prev = {c.topic: None for c in cams}  # (stamp, msg) of the latest frame
+        images = {c.topic: {} for c in cams}  # tick -> JPEG
+        start = None
+
+        def advance(topic, stamp, msg):
+            # Ticks in [previous frame's stamp, this stamp) take the previous frame.
+            p = prev[topic]
+            if p is not None:
+                k0 = max(0, int(np.ceil((p[0] - start) / step - 1e-9)))
+                k1 = int(np.ceil((stamp - start) / step - 1e-9))
+                if k1 > k0:
+                    data = jpeg(to_rgb(p[1]))
+                    for k in range(k0, k1):
+                        images[topic][k] = data
+            prev[topic] = (stamp, msg)
+
+        # One pass in log order: joint positions kept, camera frames encoded as soon as the next
+        # frame of that camera shows which ticks they cover.
         for conn, _, raw in reader.messages(connections=cams + joints):
             msg = reader.deserialize(raw, conn.msgtype)
-            if conn.msgtype == IMAGE:
-                cam_stamps[conn.topic].append(stamp_ns(msg))
-            else:
-                joint_t[conn.topic].append(stamp_ns(msg))
+            t = stamp_ns(msg)
+            first.setdefault(conn.topic, t)
+            last[conn.topic] = t
+            if conn.msgtype == JOINTS:
+                joint_t[conn.topic].append(t)
                 joint_q[conn.topic].append(msg.position)
-        cam_t = {k: np.sort(np.array(v, dtype=np.int64)) for k, v in cam_stamps.items()}
-        jt = {k: np.array(v, dtype=np.int64) for k, v in joint_t.items()}
-        jq = {k: np.array(v, dtype=np.float64) for k, v in joint_q.items()}
-        firsts = [v[0] for v in cam_t.values()] + [v[0] for v in jt.values()]
-        lasts = [v[-1] for v in cam_t.values()] + [v[-1] for v in jt.values()]
-        start, end = max(firsts), min(lasts)
-        n = int((end - start) // (1e9 / FPS)) + 1
-        ticks = start + np.round(np.arange(n) * (1e9 / FPS)).astype(np.int64)
-        # Latest frame at or before each tick; joints interpolated per column.
-        chosen = {k: np.searchsorted(v, ticks, side="right") - 1 for k, v in cam_t.items()}
-        state = np.concatenate(
-            [np.stack([np.interp(ticks, jt[k], jq[k][:, j]) for j in range(jq[k].shape[1])], axis=1)
-             for k in jt], axis=1).astype(np.float32)
-        wanted = {}  # (topic, stamp) -> ticks using that frame
-        for k, idx in chosen.items():
-            for tick, i in enumerate(idx):
-                wanted.setdefault((k, int(cam_t[k][max(i, 0)])), []).append(tick)
-        images = {c.topic: [None] * n for c in cams}
-        # Pass 2: decode, resize and encode only the chosen frames.
-        for conn, _, raw in reader.messages(connections=cams):
-            msg = reader.deserialize(raw, conn.msgtype)
-            ticks_for = wanted.get((conn.topic, stamp_ns(msg)))
-            if ticks_for:
-                data = jpeg(to_rgb(msg))
-                for tick in ticks_for:
-                    images[conn.topic][tick] = data
+            elif start is None:
+                pending[conn.topic].append((t, msg))
+            else:
+                advance(conn.topic, t, msg)
+            if start is None and len(first) == len(topics):
+                start = max(first.values())
+                for topic, frames in pending.items():
+                    for t, m in frames:
+                        advance(topic, t, m)
+                pending = {}
+        end = min(last[t] for t in topics)
+        n = int((end - start) // step) + 1
+        for topic, p in prev.items():  # the last frame covers the remaining ticks
+            k0 = max(0, int(np.ceil((p[0] - start) / step - 1e-9)))
+            if k0 < n:
+                data = jpeg(to_rgb(p[1]))
+                for k in range(k0, n):
+                    images[topic][k] = data
+        images = {topic: [per_tick[k] for k in range(n)] for topic, per_tick in images.items()}
+    ticks = start + np.round(np.arange(n) * step).astype(np.int64)
+    jt = {k: np.array(v, dtype=np.int64) for k, v in joint_t.items()}
+    jq = {k: np.array(v, dtype=np.float64) for k, v in joint_q.items()}
+    state = np.concatenate(
+        [np.stack([np.interp(ticks, jt[k], jq[k][:, j]) for j in range(jq[k].shape[1])], axis=1)
+         for k in jt], axis=1).astype(np.float32)
     ts = (ticks - ticks[0]) / 1e9
     cols = {
         "state": pa.FixedSizeListArray.from_arrays(pa.array(state.ravel(), pa.float32()), state.shape[1]),

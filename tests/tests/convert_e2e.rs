@@ -487,3 +487,57 @@ fn bimanual_state_is_14d_in_rig_order_and_matches_forward_kinematics() {
         }
     }
 }
+
+#[test]
+fn a_long_recording_splits_on_time_gaps() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = small_franka();
+    let (a, b) = (dir.path().join("a.mcap"), dir.path().join("b.mcap"));
+    synth(&a, &rig, 0, 2.5);
+    synth(&b, &rig, 1, 3.0); // starts 100 s after the first
+                             // One file holding both, as a long session bag would.
+    let long = dir.path().join("session.mcap");
+    {
+        let mut w = mcap::WriteOptions::new()
+            .profile("ros2")
+            .create(std::io::BufWriter::new(
+                std::fs::File::create(&long).unwrap(),
+            ))
+            .unwrap();
+        for part in [&a, &b] {
+            let bytes = std::fs::read(part).unwrap();
+            for m in mcap::MessageStream::new(&bytes).unwrap() {
+                w.write(&m.unwrap()).unwrap();
+            }
+        }
+        w.finish().unwrap();
+    }
+    let ds = dir.path().join("ds");
+    let rig_path = rig_file(dir.path(), &rig);
+    let args = [
+        long.as_os_str(),
+        "--rig".as_ref(),
+        rig_path.as_os_str(),
+        "--task".as_ref(),
+        "t".as_ref(),
+        "--split-gap".as_ref(),
+        "5".as_ref(),
+        "--out".as_ref(),
+        ds.as_os_str(),
+    ];
+    let out = convert(&args);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && stdout.contains("2 converted"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("session.mcap#0") && stdout.contains("session.mcap#1"),
+        "{stdout}"
+    );
+    let v = check(&ds);
+    assert_eq!(v["episodes"], 2);
+    // Both parts are in: a re-run skips the input.
+    let again = convert(&args);
+    assert!(String::from_utf8_lossy(&again.stdout).contains("1 skipped"));
+}

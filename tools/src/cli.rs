@@ -225,6 +225,10 @@ pub struct ConvertArgs {
     /// Convert episodes recorded with outcome `failure` too.
     #[arg(long)]
     pub include_failures: bool,
+    /// Split an input into episodes wherever nothing was logged for this many seconds (long
+    /// bags holding many demonstrations).
+    #[arg(long, value_name = "SECONDS")]
+    pub split_gap: Option<f64>,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {

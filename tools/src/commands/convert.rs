@@ -31,6 +31,7 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
             max_invalid_fraction: args.max_invalid,
             task: args.task,
             use_log_time: args.log_time,
+            window_ns: None,
         },
         overwrite: args.overwrite,
         shard: args.shard,
@@ -39,6 +40,7 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, usize::from)),
         file_size_mb: args.file_size_mb,
         include_failures: args.include_failures,
+        split_gap_s: args.split_gap,
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
@@ -72,19 +74,21 @@ fn summarize(results: &[(PathBuf, Outcome)], out: &Path, seconds: f64) -> Result
     let (mut converted, mut frames, mut skipped, mut failed) = (0, 0, 0, Vec::new());
     for (path, o) in results {
         match o {
-            Outcome::Converted(rec) => {
-                converted += 1;
-                frames += rec.length;
-                let dropped: u64 = rec.report.streams.iter().map(|s| s.dropped).sum();
-                println!(
+            Outcome::Converted(recs) => {
+                for rec in recs {
+                    converted += 1;
+                    frames += rec.length;
+                    let dropped: u64 = rec.report.streams.iter().map(|s| s.dropped).sum();
+                    println!(
                     "episode {:>4}  {:>5} frames  skew {:>5.1} ms  invalid {:>3}  dropped {:>3}  {}",
                     rec.episode_index,
                     rec.length,
                     rec.report.max_camera_skew_s * 1e3,
                     rec.report.invalid,
                     dropped,
-                    path.display()
+                    rec.source
                 );
+                }
             }
             Outcome::Skipped(why) => {
                 skipped += 1;
