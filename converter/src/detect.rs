@@ -35,6 +35,40 @@ pub fn task_from_metadata(rec: &Recording) -> Option<String> {
         })
 }
 
+/// Applies `--topic NAME=TOPIC` overrides to a rig; an unknown name is an error.
+pub fn override_topics(path: &Path, rig: &mut Rig, overrides: &[(String, String)]) -> Result<()> {
+    for (name, topic) in overrides {
+        let mut hit = false;
+        for c in rig.cameras.iter_mut().filter(|c| &c.name == name) {
+            c.topic = topic.clone();
+            hit = true;
+        }
+        for a in &mut rig.arms {
+            if &a.name == name {
+                a.joint_state_topic = topic.clone();
+                hit = true;
+            } else if *name == format!("{}_gripper", a.name) {
+                if let Some(g) = &mut a.gripper {
+                    g.topic = topic.clone();
+                    hit = true;
+                }
+            } else if *name == format!("{}_command", a.name) {
+                a.command_topic = Some(topic.clone());
+                hit = true;
+            }
+        }
+        if !hit {
+            let cams: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
+            let arms: Vec<&str> = rig.arms.iter().map(|a| a.name.as_str()).collect();
+            return Err(Error::input(
+                path,
+                format!("--topic {name}: no camera {cams:?} or arm {arms:?} of that name"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn rate_hz(rec: &Recording, topic: &str) -> f64 {
     let stamps: Vec<u64> = rec
         .messages
@@ -220,4 +254,38 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
     };
     Rig::parse(&toml::to_string(&rig).unwrap_or_default(), path)
         .map_err(|e| Error::input(path, format!("detected rig is inconsistent: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn topic_overrides_rename_cameras_arms_grippers_and_commands() {
+        let mut rig = Rig::builtin("franka_2zed").unwrap();
+        let arm = rig.arms[0].name.clone();
+        let cam = rig.cameras[1].name.clone();
+        let overrides = vec![
+            (cam.clone(), "/other/image".to_string()),
+            (arm.clone(), "/other/joints".to_string()),
+            (format!("{arm}_gripper"), "/other/gripper".to_string()),
+            (format!("{arm}_command"), "/leader/joints".to_string()),
+        ];
+        override_topics(Path::new("x.mcap"), &mut rig, &overrides).unwrap();
+        assert_eq!(rig.cameras[1].topic, "/other/image");
+        assert_eq!(rig.arms[0].joint_state_topic, "/other/joints");
+        assert_eq!(
+            rig.arms[0].gripper.as_ref().unwrap().topic,
+            "/other/gripper"
+        );
+        assert_eq!(rig.arms[0].command_topic.as_deref(), Some("/leader/joints"));
+
+        let bad = vec![("nope".to_string(), "/t".to_string())];
+        let e = override_topics(Path::new("x.mcap"), &mut rig, &bad).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("x.mcap") && msg.contains("--topic nope"),
+            "{msg}"
+        );
+    }
 }

@@ -48,6 +48,9 @@ pub struct ConvertOptions {
     pub use_log_time: bool,
     /// Convert only messages logged in `[start, end)` (ns): one part of a split recording.
     pub window_ns: Option<(u64, u64)>,
+    /// (name, topic): read camera / arm `name` (or `<arm>_gripper`, `<arm>_command`) from
+    /// `topic` instead of the rig's.
+    pub topic_overrides: Vec<(String, String)>,
 }
 
 impl Default for ConvertOptions {
@@ -63,6 +66,7 @@ impl Default for ConvertOptions {
             task: None,
             use_log_time: false,
             window_ns: None,
+            topic_overrides: Vec::new(),
         }
     }
 }
@@ -342,11 +346,12 @@ pub fn convert(
 ) -> Result<Episode> {
     let frames = frames_store;
     let stored = crate::detect::from_metadata(path, rec)?;
-    let rig = match (&opts.rig, stored) {
+    let mut rig = match (&opts.rig, stored) {
         (Some(r), _) => r.clone(),
         (None, Some(r)) => r,
         (None, None) => crate::detect::detect(path, rec, opts.fps.unwrap_or(10.0))?,
     };
+    crate::detect::override_topics(path, &mut rig, &opts.topic_overrides)?;
     let fps = opts.fps.unwrap_or(rig.control_rate_hz);
     let task = crate::detect::task_from_metadata(rec)
         .or_else(|| opts.task.clone())

@@ -83,3 +83,32 @@ pub fn small_bimanual() -> scaledp_schema::Rig {
     }
     rig
 }
+
+/// Every row of a float32 list column (`observation.state`, `action`, ...) of a dataset's first
+/// data file.
+pub fn f32_rows(dataset: &Path, column: &str) -> Vec<Vec<f32>> {
+    use arrow_array::{Array, FixedSizeListArray, Float32Array};
+    let file =
+        std::fs::File::open(dataset.join("data/chunk-000/file-000.parquet")).expect("a data file");
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .expect("parquet")
+        .build()
+        .expect("reader");
+    let mut rows = Vec::new();
+    for batch in reader {
+        let batch = batch.expect("a batch");
+        let a = batch
+            .column_by_name(column)
+            .unwrap_or_else(|| panic!("no column {column}"))
+            .as_any()
+            .downcast_ref::<FixedSizeListArray>()
+            .expect("a fixed-size list")
+            .clone();
+        for i in 0..a.len() {
+            let v = a.value(i);
+            let f = v.as_any().downcast_ref::<Float32Array>().expect("float32");
+            rows.push(f.values().to_vec());
+        }
+    }
+    rows
+}

@@ -10,7 +10,9 @@ use std::time::{Duration, Instant};
 use scaledp::sim::synth::write_episode;
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
-use scaledp_tests::{python, run_python, scaledp_bin, small_bimanual, small_franka, workspace};
+use scaledp_tests::{
+    f32_rows, python, run_python, scaledp_bin, small_bimanual, small_franka, workspace,
+};
 
 const T0: u64 = 1_700_000_000_000_000_000;
 
@@ -410,7 +412,6 @@ fn shards_merged_equal_one_run() {
 
 #[test]
 fn bimanual_state_is_14d_in_rig_order_and_matches_forward_kinematics() {
-    use arrow_array::{Array, FixedSizeListArray, Float32Array};
     let dir = tempfile::tempdir().unwrap();
     let rig = small_bimanual();
     let ep = dir.path().join("episode_000000.mcap");
@@ -430,34 +431,10 @@ fn bimanual_state_is_14d_in_rig_order_and_matches_forward_kinematics() {
         })
         .collect();
     assert_eq!(v["features"]["observation.state"], serde_json::json!(names));
-    let file = std::fs::File::open(ds.join("data/chunk-000/file-000.parquet")).unwrap();
-    let batch = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .unwrap()
-        .build()
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap();
-    let col = |name: &str| -> Vec<Vec<f32>> {
-        let a = batch
-            .column_by_name(name)
-            .unwrap()
-            .as_any()
-            .downcast_ref::<FixedSizeListArray>()
-            .unwrap()
-            .clone();
-        (0..a.len())
-            .map(|i| {
-                a.value(i)
-                    .as_any()
-                    .downcast_ref::<Float32Array>()
-                    .unwrap()
-                    .values()
-                    .to_vec()
-            })
-            .collect()
-    };
-    let (state, joints) = (col("observation.state"), col("observation.joints"));
+    let (state, joints) = (
+        f32_rows(&ds, "observation.state"),
+        f32_rows(&ds, "observation.joints"),
+    );
     assert_eq!((state[0].len(), joints[0].len()), (14, 14));
     for (s, j) in state.iter().zip(&joints) {
         for arm in 0..2 {
@@ -540,4 +517,63 @@ fn a_long_recording_splits_on_time_gaps() {
     // Both parts are in: a re-run skips the input.
     let again = convert(&args);
     assert!(String::from_utf8_lossy(&again.stdout).contains("1 skipped"));
+}
+
+#[test]
+fn a_command_topic_gives_the_action_instead_of_the_next_tick() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = small_franka();
+    let ep = dir.path().join("episode_000000.mcap");
+    synth(&ep, &rig, 5, 3.0);
+    let arm = &rig.arms[0];
+    let run = |name: &str, extra: &[&std::ffi::OsStr]| {
+        let ds = dir.path().join(name);
+        let mut args = vec![ep.as_os_str(), "--out".as_ref(), ds.as_os_str()];
+        args.extend_from_slice(extra);
+        let out = convert(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        (f32_rows(&ds, "observation.state"), f32_rows(&ds, "action"))
+    };
+    // Default: the action is the next tick's state.
+    let (state, action) = run("next", &[]);
+    for t in 0..state.len() - 1 {
+        assert_eq!(action[t], state[t + 1], "tick {t}");
+    }
+    // The arm's own joint states named as its command topic (a leader arm that is the follower):
+    // the action is the pose of the latest command at the tick, i.e. (about) the current state,
+    // no longer the next tick's.
+    let over = format!("{}_command={}", arm.name, arm.joint_state_topic);
+    let (state, action) = run("cmd", &["--topic".as_ref(), over.as_ref()]);
+    let dist = |a: &[f32], b: &[f32]| (0..3).map(|d| (a[d] - b[d]).powi(2)).sum::<f32>().sqrt();
+    let (mut near_now, mut moving) = (0, 0);
+    for t in 0..state.len() - 1 {
+        let step = dist(&state[t], &state[t + 1]);
+        if step > 1e-3 {
+            moving += 1;
+            if dist(&action[t], &state[t]) < 0.25 * step {
+                near_now += 1;
+            }
+        }
+    }
+    assert!(moving > 5, "the arm hardly moves: {moving} moving ticks");
+    assert_eq!(near_now, moving, "the command's pose, not the next tick's");
+    // A command topic without messages is a clear error for that file.
+    let over = format!("{}_command=/no/such/topic", arm.name);
+    let ds = dir.path().join("none");
+    let out = convert(&[
+        ep.as_os_str(),
+        "--out".as_ref(),
+        ds.as_os_str(),
+        "--topic".as_ref(),
+        over.as_ref(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && text.contains("/no/such/topic"),
+        "{text}"
+    );
 }

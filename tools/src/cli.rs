@@ -189,6 +189,9 @@ pub struct ConvertArgs {
     /// in each recording, else detected from message types and joint names).
     #[arg(long)]
     pub rig: Option<String>,
+    /// Read camera or arm NAME (or <arm>_gripper, <arm>_command) from TOPIC instead (repeatable).
+    #[arg(long = "topic", value_name = "NAME=TOPIC", value_parser = parse_pair)]
+    pub topics: Vec<(String, String)>,
     /// Target frame rate (default: the rig's control rate).
     #[arg(long)]
     pub fps: Option<f64>,
@@ -229,6 +232,13 @@ pub struct ConvertArgs {
     /// bags holding many demonstrations).
     #[arg(long, value_name = "SECONDS")]
     pub split_gap: Option<f64>,
+}
+
+fn parse_pair(s: &str) -> Result<(String, String), String> {
+    let (k, v) = s
+        .split_once('=')
+        .ok_or("expected NAME=TOPIC, e.g. wrist=/cam/wrist/image_raw")?;
+    Ok((k.to_string(), v.to_string()))
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {

@@ -26,6 +26,8 @@ struct Measured {
     wall_s: f64,
     /// Last `VmHWM` seen (bytes); None when /proc was unreadable.
     peak_rss: Option<u64>,
+    /// Last user + system CPU seconds seen.
+    cpu_s: Option<f64>,
     stdout: Vec<String>,
     stderr: Vec<String>,
 }
@@ -129,26 +131,22 @@ pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
         "cores: {cores} available; scaledp convert --jobs {jobs}; Python baseline: one process"
     );
     println!(
-        "{:<18} {:>8} {:>9} {:>10} {:>9} {:>9} {:>12}",
-        "route", "frames", "seconds", "frames/s", "in MB/s", "out MB/s", "peak RSS MB"
+        "{:<16} {:>7} {:>8} {:>9} {:>8} {:>9} {:>12} {:>7}",
+        "route", "frames", "seconds", "frames/s", "in MB/s", "out MB/s", "peak RSS MB", "CPU s"
     );
-    let row = |name: &str, frames: u64, secs: f64, out_bytes: u64, rss: Option<u64>| {
+    let row = |name: &str, frames: u64, secs: f64, out_bytes: u64, m: &Measured| {
         println!(
-            "{name:<18} {frames:>8} {secs:>9.2} {:>10.1} {:>9.1} {:>9.2} {:>12}",
+            "{name:<16} {frames:>7} {secs:>8.2} {:>9.1} {:>8.1} {:>9.2} {:>12} {:>7}",
             frames as f64 / secs,
             input_bytes as f64 / 1e6 / secs,
             out_bytes as f64 / 1e6 / secs,
-            rss.map_or("n/a".into(), |b| format!("{:.0}", b as f64 / 1e6))
+            m.peak_rss
+                .map_or("n/a".into(), |b| format!("{:.0}", b as f64 / 1e6)),
+            m.cpu_s.map_or("n/a".into(), |c| format!("{c:.1}"))
         );
     };
     let ours_fps = frames as f64 / ours.wall_s;
-    row(
-        "scaledp convert",
-        frames,
-        ours.wall_s,
-        output_bytes,
-        ours.peak_rss,
-    );
+    row("scaledp convert", frames, ours.wall_s, output_bytes, &ours);
     match python {
         Ok(py) => {
             row(
@@ -156,12 +154,12 @@ pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
                 py.frames,
                 py.seconds,
                 dir_bytes(&py_out)?,
-                py.peak_rss,
+                &py.m,
             );
             let ratio = ours_fps / (py.frames as f64 / py.seconds);
             println!(
                 "python seconds: its own timer, from after its imports to the end (process wall time {:.2} s)",
-                py.wall_s
+                py.m.wall_s
             );
             println!(
                 "ratio: {ratio:.1}× the Python frames/s; target ≥ {TARGET_RATIO:.0}×: {}",
@@ -227,8 +225,7 @@ fn generate(dir: &Path, rig: &Rig, n: usize, seconds: f64, jobs: usize) -> Resul
 struct Baseline {
     frames: u64,
     seconds: f64,
-    wall_s: f64,
-    peak_rss: Option<u64>,
+    m: Measured,
 }
 
 /// Runs the Python route; `Err` says why there is no baseline figure.
@@ -261,12 +258,11 @@ fn run_baseline(
         .arg(recordings)
         .arg(out);
     tracing::info!("running the Python baseline: {cmd:?} (timeout {timeout:?})");
-    let m = measure(cmd, Some(timeout))
-        .map_err(|e| format!("cannot run {}: {e:#}", python.display()))?;
+    let m = measure(cmd, Some(timeout)).map_err(|e| format!("{}: {e:#}", python.display()))?;
     if !m.status.success() {
-        let why = m.stderr.last().map_or("", String::as_str);
+        let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
         return Err(format!(
-            "{} exited with {}: {why}",
+            "{} exited with {}{why}",
             python.display(),
             m.status
         ));
@@ -275,12 +271,9 @@ fn run_baseline(
     let v: serde_json::Value =
         serde_json::from_str(last).map_err(|e| format!("bad baseline output '{last}': {e}"))?;
     match (v["frames"].as_u64(), v["seconds"].as_f64()) {
-        (Some(frames), Some(seconds)) if frames > 0 && seconds > 0.0 => Ok(Baseline {
-            frames,
-            seconds,
-            wall_s: m.wall_s,
-            peak_rss: m.peak_rss,
-        }),
+        (Some(frames), Some(seconds)) if frames > 0 && seconds > 0.0 => {
+            Ok(Baseline { frames, seconds, m })
+        }
         _ => Err(format!("bad baseline output '{last}'")),
     }
 }
@@ -296,10 +289,13 @@ fn measure(mut cmd: Process, timeout: Option<Duration>) -> Result<Measured> {
         .spawn()?;
     let out = forward(child.stdout.take());
     let err = forward(child.stderr.take());
-    let mut peak_rss = None;
+    let (mut peak_rss, mut cpu_s) = (None, None);
     let status = loop {
         if let Some(p) = vm_hwm(child.id()) {
             peak_rss = Some(p);
+        }
+        if let Some(c) = cpu_seconds(child.id()) {
+            cpu_s = Some(c);
         }
         if let Some(status) = child.try_wait()? {
             break status;
@@ -317,6 +313,7 @@ fn measure(mut cmd: Process, timeout: Option<Duration>) -> Result<Measured> {
         status,
         wall_s,
         peak_rss,
+        cpu_s,
         stdout: join(out),
         stderr: join(err),
     })
@@ -342,6 +339,15 @@ fn vm_hwm(pid: u32) -> Option<u64> {
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
+}
+
+/// User + system CPU seconds of a process so far, from /proc (USER_HZ is 100 on Linux).
+fn cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
 }
 
 /// Bytes of all files under `dir` (0 when it does not exist).

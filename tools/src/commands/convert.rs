@@ -32,6 +32,7 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
             task: args.task,
             use_log_time: args.log_time,
             window_ns: None,
+            topic_overrides: args.topics,
         },
         overwrite: args.overwrite,
         shard: args.shard,
