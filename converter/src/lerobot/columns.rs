@@ -15,7 +15,8 @@ use arrow_buffer::OffsetBuffer;
 use arrow_schema::{DataType, Field, Fields, Schema};
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
-use parquet::file::properties::WriterProperties;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
+use parquet::schema::types::ColumnPath;
 
 use crate::error::{Error, Result};
 
@@ -155,6 +156,28 @@ pub fn write_parquet(path: &Path, batches: &[RecordBatch]) -> Result<u64> {
     Ok(size)
 }
 
+/// Snappy pages of at most 64 KiB, checked every 8 rows, so a loader reading a few frames reads
+/// a few pages, not a whole column chunk; encoded images (the `bytes` of struct columns) are
+/// stored as they are: no compression, dictionary or statistics, which JPEG/PNG bytes defeat.
+fn writer_properties(schema: &Schema) -> WriterProperties {
+    let mut b = WriterProperties::builder()
+        .set_compression(Compression::SNAPPY)
+        .set_data_page_size_limit(64 << 10)
+        .set_write_batch_size(8);
+    for f in schema.fields() {
+        if let DataType::Struct(children) = f.data_type() {
+            if children.iter().any(|c| c.name() == "bytes") {
+                let col = ColumnPath::new(vec![f.name().clone(), "bytes".into()]);
+                b = b
+                    .set_column_compression(col.clone(), Compression::UNCOMPRESSED)
+                    .set_column_dictionary_enabled(col.clone(), false)
+                    .set_column_statistics_enabled(col, EnabledStatistics::None);
+            }
+        }
+    }
+    b.build()
+}
+
 /// Writes batches to `path.tmp` (synced) and stages the rename; returns the file size.
 pub fn stage_parquet(path: &Path, batches: &[RecordBatch], staged: &mut Staged) -> Result<u64> {
     let Some(first) = batches.first() else {
@@ -172,9 +195,7 @@ pub fn stage_parquet(path: &Path, batches: &[RecordBatch], staged: &mut Staged) 
     }
     let tmp = path.with_extension("parquet.tmp");
     let file = File::create(&tmp).map_err(Error::io(&tmp))?;
-    let props = WriterProperties::builder()
-        .set_compression(Compression::SNAPPY)
-        .build();
+    let props = writer_properties(first.schema().as_ref());
     let mut w = ArrowWriter::try_new(file, first.schema(), Some(props)).map_err(err)?;
     for b in batches {
         w.write(b).map_err(err)?;
