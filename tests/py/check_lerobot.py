@@ -1,5 +1,5 @@
 """Checks a dataset written by `scaledp convert` against what LeRobot v3.0 reads, using the
-dataset LeRobot itself wrote (shared/lerobot_v3_example) as the reference.
+dataset LeRobot itself wrote (tests/fixtures/lerobot_v3_example) as the reference.
 
 Usage: check_lerobot.py DATASET EXAMPLE
 Prints JSON {"errors": [...], "episodes": N, "frames": N, "tasks": [...], "features": {...}}.

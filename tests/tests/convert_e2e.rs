@@ -48,7 +48,7 @@ fn convert(args: &[&std::ffi::OsStr]) -> Output {
 fn check(ds: &Path) -> serde_json::Value {
     let v = run_python(
         "check_lerobot.py",
-        &[ds, &workspace().join("../shared/lerobot_v3_example")],
+        &[ds, &workspace().join("tests/fixtures/lerobot_v3_example")],
     );
     assert_eq!(v["errors"], serde_json::json!([]), "{}", ds.display());
     v

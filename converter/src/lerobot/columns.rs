@@ -1,4 +1,4 @@
-//! Arrow columns in the exact shapes LeRobot v3.0 writes (see `shared/lerobot_v3_example`):
+//! Arrow columns in the exact shapes LeRobot v3.0 writes (see `tests/fixtures/lerobot_v3_example`):
 //! vectors as `fixed_size_list<element: float>[N]`, images as `struct<bytes: binary, path:
 //! string>`, lists with an `element` child, snappy-compressed Parquet, one row group per episode.
 
