@@ -1,1 +1,34 @@
-//! placeholder
+//! The shuffled action-chunk loader for ScaleDP training: opens a LeRobot v3.0 dataset (what
+//! `scaledp convert` writes, or any v3.0 dataset with image features) from a directory or
+//! S3-compatible storage, and yields contiguous batches — observation windows of To frames
+//! (images `[B, To, cams, 3, H, W]`, normalized state), the next C actions, and
+//! diffusion_policy-style edge padding with `obs_is_pad` / `action_is_pad` masks.
+//!
+//! Only the columns and rows a sample needs are read; JPEGs are decoded on a thread pool
+//! straight into the batch; batches are prepared ahead on a background thread. Orders are
+//! seeded per epoch, identical for any thread count, shardable for DDP, and resumable. A
+//! streaming mode reads whole episodes through a bounded buffer for datasets larger than memory.
+
+mod batch;
+mod decode;
+mod error;
+mod loader;
+mod meta;
+mod normalize;
+mod options;
+mod reader;
+mod sampler;
+mod store;
+
+pub use batch::Batch;
+pub use error::{Error, Result};
+pub use loader::{DatasetInfo, Loader, LoaderState};
+pub use normalize::{Affine, Norm, Normalizer};
+pub use options::LoaderOptions;
+pub use sampler::{split_episodes, window, Split, Window};
+
+/// Decodes an encoded image (JPEG or PNG) into channel-first RGB of the given size — the
+/// loader's own decoder, for benchmarks that measure the decoding limit.
+pub fn decode_image(encoded: &[u8], width: u32, height: u32, dst: &mut [u8]) -> std::result::Result<(), String> {
+    decode::decode_into(encoded, width, height, dst)
+}

@@ -1,0 +1,216 @@
+//! Building one batch: the samples' windows, state and action rows (normalized), padding
+//! masks, and images decoded in parallel straight into the batch's contiguous buffer. In
+//! streaming mode a [`Cache`] holds the encoded images of the open episodes and lets each go
+//! after its last sample.
+
+use std::collections::HashMap;
+use std::ops::Range;
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use crate::decode::decode_into;
+use crate::error::{Error, Result};
+use crate::loader::Shared;
+use crate::reader::ImageColumn;
+use crate::sampler::{window, Sample};
+
+/// One batch, contiguous and row-major.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Batch {
+    /// Samples in the batch, B (the last batch of an epoch may be shorter).
+    pub len: usize,
+    /// Observation frames per sample, To.
+    pub obs_horizon: usize,
+    /// Actions per sample, C.
+    pub action_chunk: usize,
+    /// Camera keys, in image order.
+    pub cameras: Vec<String>,
+    /// Image height.
+    pub height: u32,
+    /// Image width.
+    pub width: u32,
+    /// State width, S.
+    pub state_dim: usize,
+    /// Action width, A.
+    pub action_dim: usize,
+    /// `[B, To, cams, 3, H, W]`, RGB, channel-first.
+    pub images: Vec<u8>,
+    /// `[B, To, S]`, normalized.
+    pub state: Vec<f32>,
+    /// `[B, C, A]`, normalized.
+    pub action: Vec<f32>,
+    /// `[B, To]`: observation frames before the episode (copies of frame 0).
+    pub obs_is_pad: Vec<bool>,
+    /// `[B, C]`: action frames after the episode (copies of its last frame).
+    pub action_is_pad: Vec<bool>,
+    /// `[B]`: each sample's `episode_index`.
+    pub episode_index: Vec<i64>,
+    /// `[B]`: each sample's current frame t.
+    pub frame_index: Vec<i64>,
+}
+
+/// Encoded images of the open episodes (streaming mode).
+pub(crate) struct Cache {
+    open: HashMap<u32, Arc<Vec<ImageColumn>>>,
+    /// Whether position i of the order is its episode's last use (before the episode would be
+    /// read again).
+    last_use: Vec<bool>,
+    /// Most episodes open at once so far.
+    pub peak_open: usize,
+}
+
+impl Cache {
+    pub fn new(order: &[Sample], main_len: usize) -> Self {
+        let mut last_use = vec![false; order.len()];
+        for seg in [0..main_len.min(order.len()), main_len.min(order.len())..order.len()] {
+            let mut seen = std::collections::HashSet::new();
+            for i in seg.rev() {
+                last_use[i] = seen.insert(order[i].episode);
+            }
+        }
+        Cache {
+            open: HashMap::new(),
+            last_use,
+            peak_open: 0,
+        }
+    }
+}
+
+/// Builds the batch of `order[range]`.
+pub(crate) fn assemble(shared: &Shared, order: &[Sample], range: Range<usize>, cache: Option<&mut Cache>) -> Result<Batch> {
+    let o = &shared.opts;
+    let info = &shared.info;
+    let samples = &order[range.clone()];
+    let (to, c, cams) = (o.obs_horizon, o.action_chunk, info.cameras.len());
+    let (s_dim, a_dim) = (shared.data.state_dim, shared.data.action_dim);
+    let plane = 3 * info.width as usize * info.height as usize;
+    let per_sample = to * cams * plane;
+    let b = samples.len();
+    let mut batch = Batch {
+        len: b,
+        obs_horizon: to,
+        action_chunk: c,
+        cameras: info.cameras.clone(),
+        height: info.height,
+        width: info.width,
+        state_dim: s_dim,
+        action_dim: a_dim,
+        images: vec![0; b * per_sample],
+        state: vec![0.0; b * to * s_dim],
+        action: vec![0.0; b * c * a_dim],
+        obs_is_pad: vec![false; b * to],
+        action_is_pad: vec![false; b * c],
+        episode_index: samples.iter().map(|s| shared.episodes[s.episode as usize].episode_index).collect(),
+        frame_index: samples.iter().map(|s| i64::from(s.t)).collect(),
+    };
+    // Streaming: read the episodes this batch needs that are not open yet (in parallel).
+    let mut cache = cache;
+    if let Some(cache) = cache.as_deref_mut() {
+        let mut missing: Vec<u32> = samples.iter().map(|s| s.episode).filter(|e| !cache.open.contains_key(e)).collect();
+        missing.sort_unstable();
+        missing.dedup();
+        let loaded: Vec<(u32, Result<Vec<ImageColumn>>)> = shared.pool.install(|| {
+            missing
+                .par_iter()
+                .map(|&e| {
+                    let ep = &shared.episodes[e as usize];
+                    (e, shared.data.read_images(ep.file, ep.first_row..ep.first_row + ep.len, &info.cameras))
+                })
+                .collect()
+        });
+        for (e, cols) in loaded {
+            cache.open.insert(e, Arc::new(cols?));
+        }
+        cache.peak_open = cache.peak_open.max(cache.open.len());
+    }
+    let open = cache.as_deref().map(|c| &c.open);
+    shared.pool.install(|| {
+        batch
+            .images
+            .par_chunks_mut(per_sample.max(1))
+            .zip(batch.state.par_chunks_mut((to * s_dim).max(1)))
+            .zip(batch.action.par_chunks_mut((c * a_dim).max(1)))
+            .zip(batch.obs_is_pad.par_chunks_mut(to))
+            .zip(batch.action_is_pad.par_chunks_mut(c))
+            .zip(samples.par_iter())
+            .try_for_each(|(((((img, st), ac), op), ap), s)| fill(shared, s, open, img, st, ac, op, ap, plane))
+    })?;
+    if let Some(cache) = cache {
+        for (i, s) in range.clone().zip(samples) {
+            if cache.last_use[i] {
+                cache.open.remove(&s.episode);
+            }
+        }
+    }
+    Ok(batch)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn fill(
+    shared: &Shared,
+    s: &Sample,
+    open: Option<&HashMap<u32, Arc<Vec<ImageColumn>>>>,
+    img: &mut [u8],
+    st: &mut [f32],
+    ac: &mut [f32],
+    op: &mut [bool],
+    ap: &mut [bool],
+    plane: usize,
+) -> Result<()> {
+    let o = &shared.opts;
+    let ep = &shared.episodes[s.episode as usize];
+    let w = window(ep.len, s.t as usize, o.obs_horizon, o.action_chunk, o.action_offset);
+    let (sd, ad) = (shared.data.state_dim, shared.data.action_dim);
+    for (k, &f) in w.obs.iter().enumerate() {
+        let row = ep.offset + f;
+        st[k * sd..(k + 1) * sd].copy_from_slice(&shared.data.state[row * sd..(row + 1) * sd]);
+    }
+    for (k, &f) in w.action.iter().enumerate() {
+        let row = ep.offset + f;
+        ac[k * ad..(k + 1) * ad].copy_from_slice(&shared.data.action[row * ad..(row + 1) * ad]);
+    }
+    shared.norm.normalize_state(st);
+    shared.norm.normalize_action(ac);
+    op.copy_from_slice(&w.obs_is_pad);
+    ap.copy_from_slice(&w.action_is_pad);
+    let cams = &shared.info.cameras;
+    if cams.is_empty() {
+        return Ok(());
+    }
+    // Obs frames are ascending: one read covers them all.
+    let (lo, hi) = (w.obs[0], w.obs[w.obs.len() - 1]);
+    let (cols, base) = match open {
+        Some(open) => (
+            open.get(&s.episode)
+                .cloned()
+                .ok_or_else(|| Error::Stopped(format!("episode {} was not read", ep.episode_index)))?,
+            0,
+        ),
+        None => (
+            Arc::new(shared.data.read_images(ep.file, ep.first_row + lo..ep.first_row + hi + 1, cams)?),
+            lo,
+        ),
+    };
+    let (width, height) = (shared.info.width, shared.info.height);
+    for (k, &f) in w.obs.iter().enumerate() {
+        for (ci, cam) in cams.iter().enumerate() {
+            let slot = (k * cams.len() + ci) * plane;
+            if k > 0 && w.obs[k - 1] == f {
+                let prev = ((k - 1) * cams.len() + ci) * plane;
+                img.copy_within(prev..prev + plane, slot);
+                continue;
+            }
+            let err = |reason: String| Error::Image {
+                path: shared.data.files[ep.file].file.name.clone(),
+                episode: ep.episode_index,
+                frame: f,
+                camera: cam.clone(),
+                reason,
+            };
+            let encoded = cols[ci].get(f - base).ok_or_else(|| err("no image (null)".into()))?;
+            decode_into(encoded, width, height, &mut img[slot..slot + plane]).map_err(err)?;
+        }
+    }
+    Ok(())
+}

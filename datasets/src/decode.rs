@@ -1,0 +1,109 @@
+//! Encoded image → the batch's channel-first RGB slot: JPEG with zune-jpeg (SIMD), anything
+//! else through the `image` crate, resized with fast_image_resize (bilinear) when the stored
+//! size differs from the requested one. Scratch buffers are kept per thread and reused.
+
+use std::cell::RefCell;
+
+use fast_image_resize as fr;
+use zune_core::bytestream::ZCursor;
+use zune_core::colorspace::ColorSpace;
+use zune_core::options::DecoderOptions;
+use zune_jpeg::JpegDecoder;
+
+thread_local! {
+    static SCRATCH: RefCell<(Vec<u8>, Vec<u8>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+}
+
+/// Decodes `encoded` into `dst` (3 × height × width, channel-first RGB).
+pub fn decode_into(encoded: &[u8], width: u32, height: u32, dst: &mut [u8]) -> Result<(), String> {
+    SCRATCH.with(|s| {
+        let (rgb, resized) = &mut *s.borrow_mut();
+        let (w, h) = decode_rgb(encoded, rgb)?;
+        let hwc: &[u8] = if (w, h) == (width, height) {
+            rgb
+        } else {
+            resize(rgb, w, h, width, height, resized)?;
+            resized
+        };
+        to_chw(hwc, width as usize, height as usize, dst);
+        Ok(())
+    })
+}
+
+/// Decodes to interleaved RGB in `out`; returns (width, height).
+pub fn decode_rgb(encoded: &[u8], out: &mut Vec<u8>) -> Result<(u32, u32), String> {
+    if encoded.starts_with(&[0xFF, 0xD8]) {
+        let options = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::RGB);
+        let mut d = JpegDecoder::new_with_options(ZCursor::new(encoded), options);
+        d.decode_headers().map_err(|e| format!("JPEG: {e:?}"))?;
+        let info = d.info().ok_or("JPEG without a frame header")?;
+        let size = d.output_buffer_size().ok_or("JPEG too large")?;
+        out.resize(size, 0);
+        d.decode_into(out).map_err(|e| format!("JPEG: {e:?}"))?;
+        let (w, h) = (u32::from(info.width), u32::from(info.height));
+        if size != w as usize * h as usize * 3 {
+            return Err(format!("JPEG decoded to {size} bytes for {w}×{h} RGB"));
+        }
+        Ok((w, h))
+    } else {
+        let img = image::load_from_memory(encoded).map_err(|e| e.to_string())?.to_rgb8();
+        let (w, h) = img.dimensions();
+        out.clear();
+        out.extend_from_slice(img.as_raw());
+        Ok((w, h))
+    }
+}
+
+fn resize(src: &[u8], w: u32, h: u32, dw: u32, dh: u32, out: &mut Vec<u8>) -> Result<(), String> {
+    let src = fr::images::ImageRef::new(w, h, src, fr::PixelType::U8x3).map_err(|e| e.to_string())?;
+    out.resize(dw as usize * dh as usize * 3, 0);
+    let mut dst = fr::images::Image::from_slice_u8(dw, dh, out, fr::PixelType::U8x3).map_err(|e| e.to_string())?;
+    let options = fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Bilinear));
+    fr::Resizer::new()
+        .resize(&src, &mut dst, &options)
+        .map_err(|e| e.to_string())
+}
+
+/// Interleaved RGB (H × W × 3) → planar (3 × H × W).
+fn to_chw(hwc: &[u8], width: usize, height: usize, dst: &mut [u8]) {
+    let plane = width * height;
+    let (r, rest) = dst.split_at_mut(plane);
+    let (g, b) = rest.split_at_mut(plane);
+    for (i, px) in hwc.chunks_exact(3).take(plane).enumerate() {
+        r[i] = px[0];
+        g[i] = px[1];
+        b[i] = px[2];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn jpeg(w: u32, h: u32) -> Vec<u8> {
+        let mut img = image::RgbImage::new(w, h);
+        for (x, y, p) in img.enumerate_pixels_mut() {
+            *p = image::Rgb([(x * 255 / w) as u8, (y * 255 / h) as u8, 128]);
+        }
+        let mut out = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Jpeg).unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn jpeg_decodes_channel_first_and_resizes() {
+        let enc = jpeg(64, 48);
+        let mut dst = vec![0u8; 3 * 64 * 48];
+        decode_into(&enc, 64, 48, &mut dst).unwrap();
+        // Red grows along x, green along y, blue constant (JPEG is lossy: tolerances).
+        let at = |c: usize, y: usize, x: usize| i32::from(dst[c * 64 * 48 + y * 64 + x]);
+        assert!(at(0, 10, 60) - at(0, 10, 2) > 200);
+        assert!(at(1, 45, 30) - at(1, 2, 30) > 200);
+        assert!((at(2, 20, 20) - 128).abs() < 8);
+        let mut small = vec![0u8; 3 * 32 * 24];
+        decode_into(&enc, 32, 24, &mut small).unwrap();
+        let at = |c: usize, y: usize, x: usize| i32::from(small[c * 32 * 24 + y * 32 + x]);
+        assert!(at(0, 5, 30) - at(0, 5, 1) > 200);
+        assert!(decode_into(b"not an image", 64, 48, &mut dst).is_err());
+    }
+}

@@ -1,0 +1,375 @@
+//! [`Loader`]: opens a dataset, keeps this epoch's order, and hands out batches that a
+//! background thread prepares `prefetch` ahead on a rayon pool.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use crossbeam_channel::{bounded, Receiver};
+
+use crate::batch::{self, Batch, Cache};
+use crate::error::{Error, Result};
+use crate::meta::Meta;
+use crate::normalize::{Affine, Normalizer};
+use crate::options::LoaderOptions;
+use crate::reader::{Data, EpisodeRows};
+use crate::sampler::{self, Sample};
+use crate::store::Store;
+
+/// Where a loader stands: the epoch and the samples already yielded in it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct LoaderState {
+    /// The epoch.
+    pub epoch: u64,
+    /// Samples of this rank already yielded in the epoch.
+    pub position: u64,
+}
+
+/// What a loader reads.
+#[derive(Clone, Debug)]
+pub struct DatasetInfo {
+    /// The dataset location.
+    pub location: String,
+    /// Frames per second.
+    pub fps: f64,
+    /// Camera keys in image order.
+    pub cameras: Vec<String>,
+    /// Output image size.
+    pub width: u32,
+    /// Output image size.
+    pub height: u32,
+    /// Names of the state dimensions.
+    pub state_names: Vec<String>,
+    /// Names of the action dimensions.
+    pub action_names: Vec<String>,
+    /// `episode_index` of every episode used (the split, capped), ascending.
+    pub episodes: Vec<i64>,
+    /// Frames of those episodes.
+    pub frames: usize,
+    /// Episodes in the whole dataset.
+    pub total_episodes: usize,
+}
+
+/// Everything the prefetch thread shares with the loader.
+pub(crate) struct Shared {
+    pub data: Data,
+    pub episodes: Vec<EpisodeRows>,
+    pub opts: LoaderOptions,
+    pub info: DatasetInfo,
+    pub norm: Normalizer,
+    pub pool: rayon::ThreadPool,
+    samples: Vec<Sample>,
+}
+
+struct Producer {
+    rx: Receiver<Result<Batch>>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl Drop for Producer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        // Unblock a send waiting on a full channel, then wait for the thread.
+        while self.rx.try_recv().is_ok() {}
+        if let Some(h) = self.handle.take() {
+            while !h.is_finished() {
+                while self.rx.try_recv().is_ok() {}
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            let _ = h.join();
+        }
+    }
+}
+
+/// Streams batches of action-chunk samples; see [`LoaderOptions`].
+pub struct Loader {
+    shared: Arc<Shared>,
+    bytes_read: Arc<AtomicU64>,
+    epoch: u64,
+    position: u64,
+    order: Arc<Vec<Sample>>,
+    /// End of the unpadded part of a streaming order.
+    main_len: usize,
+    producer: Option<Producer>,
+}
+
+impl Loader {
+    pub(crate) fn open(location: &str, opts: LoaderOptions) -> Result<Self> {
+        let bad = |m: String| Err(Error::Options(format!("{location}: {m}")));
+        if opts.obs_horizon == 0 || opts.action_chunk == 0 || opts.batch_size == 0 {
+            return bad("obs_horizon, action_chunk and batch_size must be at least 1".into());
+        }
+        if opts.world_size == 0 || opts.rank >= opts.world_size {
+            return bad(format!("rank {} of world size {}", opts.rank, opts.world_size));
+        }
+        if !(0.0..=1.0).contains(&opts.val_ratio) {
+            return bad(format!("val_ratio {} outside [0, 1]", opts.val_ratio));
+        }
+        let store = Store::open(location)?;
+        let meta = Meta::read(&store)?;
+        let info_file = store.describe("meta/info.json");
+        let feature = |key: &str| {
+            meta.features
+                .get(key)
+                .ok_or_else(|| Error::format(info_file.clone(), format!("no feature {key}")))
+        };
+        let (state_f, action_f) = (feature(&opts.state_key)?, feature(&opts.action_key)?);
+        let all_cams = meta.image_keys();
+        let cameras: Vec<String> = match &opts.cameras {
+            None => all_cams.clone(),
+            Some(names) => names
+                .iter()
+                .map(|n| {
+                    [n.clone(), format!("observation.images.{n}")]
+                        .into_iter()
+                        .find(|k| all_cams.contains(k))
+                        .ok_or_else(|| {
+                            Error::format(info_file.clone(), format!("no camera {n} (cameras: {all_cams:?})"))
+                        })
+                })
+                .collect::<Result<_>>()?,
+        };
+        for c in &cameras {
+            if meta.features[c].dtype == "video" {
+                return Err(Error::format(
+                    info_file,
+                    format!("{c} is stored as video; this loader reads image features (convert with images)"),
+                ));
+            }
+        }
+        let (width, height) = match opts.image_size {
+            Some(s) => s,
+            None => {
+                let shapes: Vec<&Vec<usize>> = cameras.iter().map(|c| &meta.features[c].shape).collect();
+                match shapes.first() {
+                    None => (0, 0),
+                    Some(s) if s.len() == 3 && shapes.iter().all(|x| x == s) => (s[1] as u32, s[0] as u32),
+                    _ => return bad(format!("cameras of different shapes {shapes:?}: choose an image_size")),
+                }
+            }
+        };
+        let bytes_read = Arc::new(AtomicU64::new(0));
+        let data = Data::open(&store, &opts.state_key, &opts.action_key, bytes_read.clone())?;
+        let stats_file = store.describe("meta/stats.json");
+        let norm = Normalizer {
+            state: Affine::new(opts.state_norm, &opts.state_key, data.state_dim, &meta.stats, &stats_file)?,
+            action: Affine::new(opts.action_norm, &opts.action_key, data.action_dim, &meta.stats, &stats_file)?,
+        };
+        let chosen = sampler::split_episodes(
+            data.episodes.len(),
+            opts.split,
+            opts.val_ratio,
+            opts.split_seed,
+            opts.max_episodes,
+        );
+        let episodes: Vec<EpisodeRows> = chosen.iter().map(|&i| data.episodes[i].clone()).collect();
+        let lens: Vec<usize> = episodes.iter().map(|e| e.len).collect();
+        let samples = sampler::samples(&lens, opts.drop_first, opts.drop_last);
+        let threads = if opts.threads == 0 {
+            std::thread::available_parallelism().map_or(1, usize::from)
+        } else {
+            opts.threads
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("scaledp-decode-{i}"))
+            .build()
+            .map_err(|e| Error::Options(format!("cannot start {threads} decoding threads: {e}")))?;
+        let info = DatasetInfo {
+            location: location.to_string(),
+            fps: meta.fps,
+            cameras,
+            width,
+            height,
+            state_names: state_f.dim_names(),
+            action_names: action_f.dim_names(),
+            episodes: episodes.iter().map(|e| e.episode_index).collect(),
+            frames: lens.iter().sum(),
+            total_episodes: data.episodes.len(),
+        };
+        tracing::debug!(
+            "{location}: {} of {} episodes, {} samples, {} cameras {}×{}, {threads} threads",
+            info.episodes.len(),
+            info.total_episodes,
+            samples.len(),
+            info.cameras.len(),
+            width,
+            height
+        );
+        let shared = Arc::new(Shared {
+            data,
+            episodes,
+            opts,
+            info,
+            norm,
+            pool,
+            samples,
+        });
+        let mut loader = Loader {
+            shared,
+            bytes_read,
+            epoch: 0,
+            position: 0,
+            order: Arc::new(Vec::new()),
+            main_len: 0,
+            producer: None,
+        };
+        loader.set_epoch(0);
+        Ok(loader)
+    }
+
+    /// Samples this rank yields in the current epoch.
+    pub fn len(&self) -> usize {
+        let (n, b) = (self.order.len(), self.shared.opts.batch_size);
+        if self.shared.opts.drop_incomplete_batch {
+            n / b * b
+        } else {
+            n
+        }
+    }
+
+    /// Whether the epoch has no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Batches in the current epoch.
+    pub fn batches_per_epoch(&self) -> usize {
+        self.len().div_ceil(self.shared.opts.batch_size)
+    }
+
+    /// Starts epoch `epoch`: its own permutation, from the first sample.
+    pub fn set_epoch(&mut self, epoch: u64) {
+        self.producer = None;
+        let o = &self.shared.opts;
+        let (order, main_len) = match o.streaming {
+            None => {
+                let idx = sampler::random_order(self.shared.samples.len(), o.shuffle, o.seed, epoch, o.rank, o.world_size);
+                let n = idx.len();
+                (idx.into_iter().map(|i| self.shared.samples[i]).collect(), n)
+            }
+            Some(buffer) => {
+                let lens: Vec<usize> = self.shared.episodes.iter().map(|e| e.len).collect();
+                let spec = sampler::StreamSpec {
+                    drop_first: o.drop_first,
+                    drop_last: o.drop_last,
+                    buffer_episodes: buffer,
+                    shuffle: o.shuffle,
+                    seed: o.seed,
+                };
+                sampler::streaming_order(&lens, &spec, epoch, o.rank, o.world_size)
+            }
+        };
+        self.order = Arc::new(order);
+        self.main_len = main_len;
+        self.epoch = epoch;
+        self.position = 0;
+    }
+
+    /// Where the next batch starts.
+    pub fn state(&self) -> LoaderState {
+        LoaderState {
+            epoch: self.epoch,
+            position: self.position,
+        }
+    }
+
+    /// Continues from `state` (as returned by [`Loader::state`] of a loader with the same options).
+    pub fn resume(&mut self, state: LoaderState) -> Result<()> {
+        self.set_epoch(state.epoch);
+        if state.position > self.len() as u64 {
+            return Err(Error::Options(format!(
+                "cannot resume at sample {} of an epoch of {}",
+                state.position,
+                self.len()
+            )));
+        }
+        self.position = state.position;
+        Ok(())
+    }
+
+    /// The state and action normalization applied to batches.
+    pub fn normalizer(&self) -> &Normalizer {
+        &self.shared.norm
+    }
+
+    /// What the loader reads.
+    pub fn info(&self) -> &DatasetInfo {
+        &self.shared.info
+    }
+
+    /// Bytes read from data files so far (footers, small columns and image pages).
+    pub fn bytes_read(&self) -> u64 {
+        self.bytes_read.load(Ordering::Relaxed)
+    }
+
+    /// The next batch of the epoch; `None` at its end.
+    pub fn next_batch(&mut self) -> Option<Result<Batch>> {
+        if self.position >= self.len() as u64 {
+            return None;
+        }
+        if self.producer.is_none() {
+            self.producer = Some(self.spawn());
+        }
+        let got = self.producer.as_ref().map(|p| p.rx.recv());
+        match got {
+            Some(Ok(Ok(batch))) => {
+                self.position += batch.len as u64;
+                Some(Ok(batch))
+            }
+            Some(Ok(Err(e))) => {
+                self.producer = None;
+                Some(Err(e))
+            }
+            _ => {
+                self.producer = None;
+                Some(Err(Error::Stopped("no batch came".into())))
+            }
+        }
+    }
+
+    /// The rest of this epoch's batches.
+    pub fn iter(&mut self) -> impl Iterator<Item = Result<Batch>> + '_ {
+        std::iter::from_fn(move || self.next_batch())
+    }
+
+    fn spawn(&self) -> Producer {
+        let (tx, rx) = bounded(self.shared.opts.prefetch.max(1));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (shared, order, stop2) = (self.shared.clone(), self.order.clone(), stop.clone());
+        let (start, end, main_len) = (self.position as usize, self.len(), self.main_len);
+        let handle = std::thread::Builder::new()
+            .name("scaledp-prefetch".into())
+            .spawn(move || {
+                let mut cache = shared.opts.streaming.map(|_| Cache::new(&order, main_len));
+                let b = shared.opts.batch_size;
+                let mut p = start;
+                while p < end && !stop2.load(Ordering::Relaxed) {
+                    let q = (p + b).min(end);
+                    let got = batch::assemble(&shared, &order, p..q, cache.as_mut());
+                    let failed = got.is_err();
+                    if tx.send(got).is_err() || failed {
+                        break;
+                    }
+                    p = q;
+                }
+            });
+        match handle {
+            Ok(h) => Producer {
+                rx,
+                stop,
+                handle: Some(h),
+            },
+            Err(e) => {
+                let (tx, rx) = bounded(1);
+                let _ = tx.send(Err(Error::Stopped(format!("cannot start the prefetch thread: {e}"))));
+                Producer {
+                    rx,
+                    stop,
+                    handle: None,
+                }
+            }
+        }
+    }
+}

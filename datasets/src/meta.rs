@@ -1,0 +1,130 @@
+//! `meta/info.json` and `meta/stats.json` of a LeRobot v3.0 dataset: the features (dtype, shape,
+//! names), the frame rate and the statistics the normalizer is built from.
+
+use std::collections::BTreeMap;
+
+use serde::Deserialize;
+
+use crate::error::{Error, Result};
+use crate::store::Store;
+
+/// One feature of `info.json`.
+#[derive(Clone, Debug, Deserialize)]
+pub struct Feature {
+    /// `float32`, `int64`, `image`, `video`, ...
+    pub dtype: String,
+    /// Shape (`[H, W, 3]` for images).
+    #[serde(default)]
+    pub shape: Vec<usize>,
+    /// Names of the dimensions, when given (a list; LeRobot sometimes writes a map).
+    #[serde(default)]
+    pub names: Option<serde_json::Value>,
+}
+
+impl Feature {
+    /// The names of a vector feature's dimensions, or `dim_i`.
+    pub fn dim_names(&self) -> Vec<String> {
+        let n = self.shape.iter().product::<usize>();
+        let listed: Option<Vec<String>> = match &self.names {
+            Some(serde_json::Value::Array(a)) => {
+                a.iter().map(|v| v.as_str().map(String::from)).collect()
+            }
+            Some(serde_json::Value::Object(o)) => o.values().next().and_then(|v| {
+                v.as_array()
+                    .and_then(|a| a.iter().map(|x| x.as_str().map(String::from)).collect())
+            }),
+            _ => None,
+        };
+        match listed {
+            Some(l) if l.len() == n => l,
+            _ => (0..n).map(|i| format!("dim_{i}")).collect(),
+        }
+    }
+}
+
+#[derive(Deserialize)]
+struct InfoJson {
+    codebase_version: String,
+    fps: f64,
+    features: BTreeMap<String, Feature>,
+}
+
+/// The parts of `info.json` and `stats.json` the loader needs.
+#[derive(Clone, Debug)]
+pub struct Meta {
+    /// Frames per second.
+    pub fps: f64,
+    /// Every feature, by key (sorted).
+    pub features: BTreeMap<String, Feature>,
+    /// `stats.json`: feature → statistic (`min`, `max`, `mean`, `std`) → flattened values.
+    pub stats: BTreeMap<String, BTreeMap<String, Vec<f64>>>,
+}
+
+impl Meta {
+    /// Reads `meta/info.json` and (when present) `meta/stats.json`.
+    pub(crate) fn read(store: &Store) -> Result<Self> {
+        let info_rel = "meta/info.json";
+        let bytes = store.read(info_rel)?;
+        let info: InfoJson = serde_json::from_slice(&bytes)
+            .map_err(|e| Error::format(store.describe(info_rel), e))?;
+        if !info.codebase_version.starts_with("v3") {
+            return Err(Error::format(
+                store.describe(info_rel),
+                format!(
+                    "codebase_version {} (this loader reads LeRobot v3.x)",
+                    info.codebase_version
+                ),
+            ));
+        }
+        let stats_rel = "meta/stats.json";
+        let stats = match store.read(stats_rel) {
+            Ok(bytes) => parse_stats(&bytes).map_err(|e| Error::format(store.describe(stats_rel), e))?,
+            Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+                BTreeMap::new()
+            }
+            Err(e) => return Err(e),
+        };
+        Ok(Meta {
+            fps: info.fps,
+            features: info.features,
+            stats,
+        })
+    }
+
+    /// Keys of the image features, sorted.
+    pub fn image_keys(&self) -> Vec<String> {
+        self.features
+            .iter()
+            .filter(|(_, f)| f.dtype == "image" || f.dtype == "video")
+            .map(|(k, _)| k.clone())
+            .collect()
+    }
+}
+
+/// Flattens each statistic (nested lists for image stats) into one vector of numbers.
+fn parse_stats(bytes: &[u8]) -> std::result::Result<BTreeMap<String, BTreeMap<String, Vec<f64>>>, String> {
+    let v: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
+    let obj = v.as_object().ok_or("not a JSON object")?;
+    let mut out = BTreeMap::new();
+    for (feature, stats) in obj {
+        let Some(stats) = stats.as_object() else {
+            continue;
+        };
+        let mut per = BTreeMap::new();
+        for (name, value) in stats {
+            let mut flat = Vec::new();
+            flatten(value, &mut flat);
+            per.insert(name.clone(), flat);
+        }
+        out.insert(feature.clone(), per);
+    }
+    Ok(out)
+}
+
+fn flatten(v: &serde_json::Value, out: &mut Vec<f64>) {
+    match v {
+        serde_json::Value::Array(a) => a.iter().for_each(|x| flatten(x, out)),
+        serde_json::Value::Number(n) => out.extend(n.as_f64()),
+        _ => {}
+    }
+}

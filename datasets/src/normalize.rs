@@ -1,0 +1,183 @@
+//! Normalization of state and action vectors from `meta/stats.json`, exposed so a trainer can
+//! un-normalize what its policy predicts.
+
+use std::collections::BTreeMap;
+
+use crate::error::{Error, Result};
+
+/// How a feature is normalized.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Norm {
+    /// `2 (x − min) / max(max − min, 1e-4) − 1`: [-1, 1] over the dataset's range (actions).
+    MinMax,
+    /// `(x − mean) / (std + 1e-8)` (state).
+    MeanStd,
+    /// Values as stored.
+    #[default]
+    None,
+}
+
+/// Range floor of [`Norm::MinMax`], as diffusion_policy's `range_eps`.
+pub const MIN_MAX_EPS: f64 = 1e-4;
+/// Added to the standard deviation by [`Norm::MeanStd`].
+pub const MEAN_STD_EPS: f64 = 1e-8;
+
+/// `y = x · scale + offset` per dimension.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Affine {
+    /// The mode it was built from.
+    pub norm: Norm,
+    scale: Vec<f64>,
+    offset: Vec<f64>,
+}
+
+impl Affine {
+    /// Builds the transform of `feature` from its statistics.
+    pub fn new(
+        norm: Norm,
+        feature: &str,
+        dim: usize,
+        stats: &BTreeMap<String, BTreeMap<String, Vec<f64>>>,
+        stats_file: &str,
+    ) -> Result<Self> {
+        let get = |name: &str| -> Result<&Vec<f64>> {
+            let v = stats
+                .get(feature)
+                .and_then(|s| s.get(name))
+                .ok_or_else(|| Error::format(stats_file, format!("no {feature}/{name} to normalize with")))?;
+            if v.len() != dim {
+                return Err(Error::format(
+                    stats_file,
+                    format!("{feature}/{name} has {} values, the feature {dim}", v.len()),
+                ));
+            }
+            Ok(v)
+        };
+        let (scale, offset) = match norm {
+            Norm::None => (vec![1.0; dim], vec![0.0; dim]),
+            Norm::MinMax => {
+                let (min, max) = (get("min")?, get("max")?);
+                let scale: Vec<f64> = min
+                    .iter()
+                    .zip(max)
+                    .map(|(lo, hi)| 2.0 / (hi - lo).max(MIN_MAX_EPS))
+                    .collect();
+                let offset = min.iter().zip(&scale).map(|(lo, s)| -1.0 - lo * s).collect();
+                (scale, offset)
+            }
+            Norm::MeanStd => {
+                let (mean, std) = (get("mean")?, get("std")?);
+                let scale: Vec<f64> = std.iter().map(|s| 1.0 / (s + MEAN_STD_EPS)).collect();
+                let offset = mean.iter().zip(&scale).map(|(m, s)| -m * s).collect();
+                (scale, offset)
+            }
+        };
+        Ok(Affine {
+            norm,
+            scale,
+            offset,
+        })
+    }
+
+    /// Number of dimensions.
+    pub fn dim(&self) -> usize {
+        self.scale.len()
+    }
+
+    /// Normalizes rows of `dim` values in place.
+    pub fn apply(&self, x: &mut [f32]) {
+        for row in x.chunks_mut(self.dim().max(1)) {
+            for ((v, s), o) in row.iter_mut().zip(&self.scale).zip(&self.offset) {
+                *v = (f64::from(*v) * s + o) as f32;
+            }
+        }
+    }
+
+    /// Undoes [`Affine::apply`].
+    pub fn invert(&self, x: &mut [f32]) {
+        for row in x.chunks_mut(self.dim().max(1)) {
+            for ((v, s), o) in row.iter_mut().zip(&self.scale).zip(&self.offset) {
+                *v = ((f64::from(*v) - o) / s) as f32;
+            }
+        }
+    }
+}
+
+/// The state and action normalizations a loader applies.
+#[derive(Clone, Debug)]
+pub struct Normalizer {
+    /// Of `observation.state`.
+    pub state: Affine,
+    /// Of `action`.
+    pub action: Affine,
+}
+
+impl Normalizer {
+    /// Normalizes rows of state values in place.
+    pub fn normalize_state(&self, x: &mut [f32]) {
+        self.state.apply(x);
+    }
+    /// Un-normalizes rows of state values in place.
+    pub fn unnormalize_state(&self, x: &mut [f32]) {
+        self.state.invert(x);
+    }
+    /// Normalizes rows of action values in place.
+    pub fn normalize_action(&self, x: &mut [f32]) {
+        self.action.apply(x);
+    }
+    /// Un-normalizes rows of action values (a policy's prediction) in place.
+    pub fn unnormalize_action(&self, x: &mut [f32]) {
+        self.action.invert(x);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stats() -> BTreeMap<String, BTreeMap<String, Vec<f64>>> {
+        let mut s = BTreeMap::new();
+        s.insert(
+            "a".to_string(),
+            [
+                ("min", vec![-2.0, 0.5, 3.0]),
+                ("max", vec![2.0, 0.5, 7.0]),
+                ("mean", vec![0.1, 0.5, 5.0]),
+                ("std", vec![1.5, 0.0, 0.7]),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect(),
+        );
+        s
+    }
+
+    #[test]
+    fn every_mode_round_trips_and_min_max_spans_minus_one_to_one() {
+        let raw = vec![-2.0f32, 0.5, 3.0, 2.0, 0.5, 7.0, 0.3, 0.5, 4.2];
+        for norm in [Norm::MinMax, Norm::MeanStd, Norm::None] {
+            let a = Affine::new(norm, "a", 3, &stats(), "stats.json").unwrap();
+            let mut x = raw.clone();
+            a.apply(&mut x);
+            if norm == Norm::MinMax {
+                assert_eq!(&x[0..3], &[-1.0, -1.0, -1.0]);
+                assert_eq!((x[3], x[5]), (1.0, 1.0));
+            }
+            if norm == Norm::None {
+                assert_eq!(x, raw);
+            }
+            a.invert(&mut x);
+            for (got, want) in x.iter().zip(&raw) {
+                assert!((got - want).abs() <= 1e-5 * want.abs().max(1.0), "{norm:?}: {got} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn missing_or_misshapen_stats_name_the_file() {
+        let e = Affine::new(Norm::MinMax, "b", 3, &stats(), "meta/stats.json").unwrap_err();
+        assert!(e.to_string().contains("meta/stats.json") && e.to_string().contains("b/min"));
+        let e = Affine::new(Norm::MeanStd, "a", 4, &stats(), "meta/stats.json").unwrap_err();
+        assert!(e.to_string().contains("3 values"));
+    }
+}

@@ -1,0 +1,257 @@
+//! Where a dataset lives: a local directory (plain `std::fs`, positioned reads) or a prefix in
+//! S3-compatible object storage (`object_store`, configured from the standard `AWS_*`
+//! environment variables, e.g. `AWS_ENDPOINT_URL` and `AWS_ALLOW_HTTP=true` for a local server).
+//! Data files are exposed to the parquet reader as [`DataFile`]s that count the bytes they read.
+
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+use bytes::Bytes;
+use object_store::ObjectStore;
+use parquet::file::reader::{ChunkReader, Length};
+
+use crate::error::{Error, Result};
+
+/// A dataset root.
+#[derive(Clone)]
+pub(crate) enum Store {
+    Local(PathBuf),
+    Remote(Arc<Remote>),
+}
+
+pub(crate) struct Remote {
+    store: Box<dyn ObjectStore>,
+    prefix: String,
+    url: String,
+    rt: tokio::runtime::Runtime,
+}
+
+impl Remote {
+    fn key(&self, rel: &str) -> object_store::path::Path {
+        object_store::path::Path::from(format!("{}{rel}", self.prefix))
+    }
+
+    fn err(&self, rel: &str, e: impl std::fmt::Display) -> Error {
+        Error::Store {
+            path: format!("{}/{rel}", self.url.trim_end_matches('/')),
+            reason: e.to_string(),
+        }
+    }
+}
+
+impl Store {
+    /// `s3://bucket/prefix` or a local directory.
+    pub fn open(location: &str) -> Result<Self> {
+        let Some(rest) = location.strip_prefix("s3://") else {
+            let root = PathBuf::from(location);
+            if !root.is_dir() {
+                return Err(Error::Io {
+                    path: root,
+                    source: std::io::Error::new(
+                        std::io::ErrorKind::NotFound,
+                        "no such dataset directory",
+                    ),
+                });
+            }
+            return Ok(Store::Local(root));
+        };
+        let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
+        let store = object_store::aws::AmazonS3Builder::from_env()
+            .with_bucket_name(bucket)
+            .build()
+            .map_err(|e| Error::Store {
+                path: location.into(),
+                reason: e.to_string(),
+            })?;
+        let prefix = prefix.trim_matches('/');
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("scaledp-s3")
+            .enable_all()
+            .build()
+            .map_err(|e| Error::Io {
+                path: location.into(),
+                source: e,
+            })?;
+        Ok(Store::Remote(Arc::new(Remote {
+            store: Box::new(store),
+            prefix: if prefix.is_empty() {
+                String::new()
+            } else {
+                format!("{prefix}/")
+            },
+            url: location.into(),
+            rt,
+        })))
+    }
+
+    /// A description for messages: the directory or URL.
+    pub fn describe(&self, rel: &str) -> String {
+        match self {
+            Store::Local(root) => root.join(rel).display().to_string(),
+            Store::Remote(r) => format!("{}/{rel}", r.url.trim_end_matches('/')),
+        }
+    }
+
+    /// The whole object at `rel`.
+    pub fn read(&self, rel: &str) -> Result<Bytes> {
+        match self {
+            Store::Local(root) => {
+                let path = root.join(rel);
+                std::fs::read(&path)
+                    .map(Bytes::from)
+                    .map_err(|source| Error::Io { path, source })
+            }
+            Store::Remote(r) => r.rt.block_on(async {
+                let got = r.store.get(&r.key(rel)).await.map_err(|e| r.err(rel, e))?;
+                got.bytes().await.map_err(|e| r.err(rel, e))
+            }),
+        }
+    }
+
+    /// Paths (relative to the root, sorted) of the files under `dir` whose name ends in `ext`.
+    pub fn list(&self, dir: &str, ext: &str) -> Result<Vec<String>> {
+        let mut out = Vec::new();
+        match self {
+            Store::Local(root) => walk(root, Path::new(dir), ext, &mut out)?,
+            Store::Remote(r) => {
+                use futures::StreamExt;
+                let listed: Vec<_> = r.rt.block_on(async {
+                    let mut s = r.store.list(Some(&r.key(dir)));
+                    let mut v = Vec::new();
+                    while let Some(m) = s.next().await {
+                        v.push(m.map_err(|e| r.err(dir, e))?);
+                    }
+                    Ok::<_, Error>(v)
+                })?;
+                for m in listed {
+                    let key = m.location.to_string();
+                    if let Some(rel) = key.strip_prefix(&r.prefix) {
+                        if rel.ends_with(ext) {
+                            out.push(rel.to_string());
+                        }
+                    }
+                }
+            }
+        }
+        out.sort();
+        Ok(out)
+    }
+
+    /// A data file for the parquet reader; `counter` adds every byte read.
+    pub fn file(&self, rel: &str, counter: Arc<AtomicU64>) -> Result<DataFile> {
+        let backing = match self {
+            Store::Local(root) => {
+                let path = root.join(rel);
+                let file = File::open(&path).map_err(|source| Error::Io {
+                    path: path.clone(),
+                    source,
+                })?;
+                let size = file
+                    .metadata()
+                    .map_err(|source| Error::Io { path, source })?
+                    .len();
+                Backing::Local { file, size }
+            }
+            Store::Remote(r) => {
+                let key = r.key(rel);
+                let size = r
+                    .rt
+                    .block_on(r.store.head(&key))
+                    .map_err(|e| r.err(rel, e))?
+                    .size;
+                Backing::Remote {
+                    remote: r.clone(),
+                    key,
+                    size,
+                }
+            }
+        };
+        Ok(DataFile {
+            backing: Arc::new(backing),
+            name: self.describe(rel),
+            counter,
+        })
+    }
+}
+
+fn walk(root: &Path, dir: &Path, ext: &str, out: &mut Vec<String>) -> Result<()> {
+    let full = root.join(dir);
+    let entries = match std::fs::read_dir(&full) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(source) => return Err(Error::Io { path: full, source }),
+    };
+    for entry in entries {
+        let entry = entry.map_err(|source| Error::Io {
+            path: full.clone(),
+            source,
+        })?;
+        let rel = dir.join(entry.file_name());
+        if entry.file_type().is_ok_and(|t| t.is_dir()) {
+            walk(root, &rel, ext, out)?;
+        } else if let Some(s) = rel.to_str().filter(|s| s.ends_with(ext)) {
+            out.push(s.to_string());
+        }
+    }
+    Ok(())
+}
+
+enum Backing {
+    Local {
+        file: File,
+        size: u64,
+    },
+    Remote {
+        remote: Arc<Remote>,
+        key: object_store::path::Path,
+        size: u64,
+    },
+}
+
+/// One parquet data file, shareable between threads (positioned reads, no shared cursor).
+#[derive(Clone)]
+pub(crate) struct DataFile {
+    backing: Arc<Backing>,
+    /// The path or URL, for messages.
+    pub name: String,
+    counter: Arc<AtomicU64>,
+}
+
+impl Length for DataFile {
+    fn len(&self) -> u64 {
+        match &*self.backing {
+            Backing::Local { size, .. } | Backing::Remote { size, .. } => *size,
+        }
+    }
+}
+
+impl ChunkReader for DataFile {
+    type T = std::io::Cursor<Bytes>;
+
+    fn get_read(&self, start: u64) -> parquet::errors::Result<Self::T> {
+        let len = self.len().saturating_sub(start);
+        let len = usize::try_from(len).map_err(|e| parquet::errors::ParquetError::External(e.into()))?;
+        self.get_bytes(start, len).map(std::io::Cursor::new)
+    }
+
+    fn get_bytes(&self, start: u64, length: usize) -> parquet::errors::Result<Bytes> {
+        let ext = |e: String| parquet::errors::ParquetError::General(format!("{}: {e}", self.name));
+        self.counter.fetch_add(length as u64, Ordering::Relaxed);
+        match &*self.backing {
+            Backing::Local { file, .. } => {
+                let mut buf = vec![0u8; length];
+                file.read_exact_at(&mut buf, start)
+                    .map_err(|e| ext(e.to_string()))?;
+                Ok(Bytes::from(buf))
+            }
+            Backing::Remote { remote, key, .. } => remote
+                .rt
+                .block_on(remote.store.get_range(key, start..start + length as u64))
+                .map_err(|e| ext(e.to_string())),
+        }
+    }
+}
