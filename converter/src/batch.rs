@@ -129,6 +129,17 @@ pub fn shard(inputs: &[PathBuf], i: usize, n: usize) -> &[PathBuf] {
     &inputs[len * i / n..len * (i + 1) / n]
 }
 
+/// A hasher fed the file name, as [`content_hash`] starts for each file.
+fn hasher_for(path: &Path) -> blake3::Hasher {
+    let mut h = blake3::Hasher::new();
+    h.update(
+        path.file_name()
+            .map(|n| n.as_encoded_bytes())
+            .unwrap_or_default(),
+    );
+    h
+}
+
 /// BLAKE3 of a file, or of a directory's files (names and contents, in name order).
 pub fn content_hash(path: &Path) -> Result<String> {
     let mut h = blake3::Hasher::new();
@@ -252,7 +263,13 @@ fn fully_converted(existing: &[String], h: &str) -> bool {
     n.is_some_and(|n| (0..n).all(|k| parts.contains(&format!("{k}/{n}").as_str())))
 }
 
-fn convert_one(path: &Path, opts: &JobOptions) -> Converted {
+fn is_mcap_file(path: &Path) -> bool {
+    path.is_file() && path.extension().is_some_and(|e| e == "mcap")
+}
+
+/// Converts one input; for an MCAP file with `hash`, also returns its [`content_hash`], taken
+/// during the one read (no second pass over the file).
+fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option<String>) {
     let failed = |e: Error| Outcome::Failed(e.to_string());
     let run = |rec: &Recording, frames: &dyn FrameStore| -> Converted {
         check_outcome(rec, opts)?;
@@ -274,12 +291,21 @@ fn convert_one(path: &Path, opts: &JobOptions) -> Converted {
         }
         Ok(episodes)
     };
-    if path.is_file() && path.extension().is_some_and(|e| e == "mcap") {
-        let (rec, frames) = crate::frames::read_mcap_light(path, &useful_topic).map_err(failed)?;
-        return run(&rec, &frames);
+    if is_mcap_file(path) {
+        // Without a split, frames are encoded during the one read (see `crate::prefetch`).
+        let prefetch = opts.split_gap_s.is_none().then_some(&opts.convert);
+        let mut hasher = hash.then(|| hasher_for(path));
+        let read = crate::frames::read_mcap_hashed(path, &useful_topic, prefetch, hasher.as_mut());
+        let converted = match read {
+            Ok((rec, frames)) => run(&rec, &frames),
+            Err(e) => Err(failed(e)),
+        };
+        return (converted, hasher.map(|h| h.finalize().to_hex().to_string()));
     }
-    let rec = read_input(path).map_err(failed)?;
-    run(&rec, &crate::frames::InMemory(&rec))
+    let converted = read_input(path)
+        .map_err(failed)
+        .and_then(|rec| run(&rec, &crate::frames::InMemory(&rec)));
+    (converted, None)
 }
 
 /// Skips episodes the operator marked as discarded or failed.
@@ -339,13 +365,23 @@ pub fn run(
                     .par_iter()
                     .enumerate()
                     .for_each_with(tx, |tx, (i, path)| {
-                        let hash = content_hash(path);
-                        let r = match &hash {
-                            Err(e) => Err(Outcome::Failed(e.to_string())),
-                            Ok(h) if fully_converted(&existing, h) => {
-                                Err(Outcome::Skipped("already in the dataset".into()))
+                        let (hash, r) = match existing.is_empty() && is_mcap_file(path) {
+                            // Nothing to skip: hash the file during its one read.
+                            true => match convert_one(path, opts, true) {
+                                (r, Some(h)) => (Ok(h), r),
+                                (r, None) => (content_hash(path), r),
+                            },
+                            false => {
+                                let hash = content_hash(path);
+                                let r = match &hash {
+                                    Err(e) => Err(Outcome::Failed(e.to_string())),
+                                    Ok(h) if fully_converted(&existing, h) => {
+                                        Err(Outcome::Skipped("already in the dataset".into()))
+                                    }
+                                    Ok(_) => convert_one(path, opts, false).0,
+                                };
+                                (hash, r)
                             }
-                            Ok(_) => convert_one(path, opts),
                         };
                         let _ = tx.send((i, hash.unwrap_or_default(), r));
                     });

@@ -1,28 +1,19 @@
 //! One input → one training episode: aligned ticks, end-effector state and action per arm,
 //! joint positions, and resized JPEG frames per camera.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use glam::DMat4;
-use rayon::prelude::*;
 use scaledp_schema::kinematics::{pose6_from_transform, rotation_from_rpy, unwrap_angles};
 use scaledp_schema::rig::{Arm, Rig};
 
 use crate::align::{align, AlignmentReport, Stream};
-use crate::decode::{self, Frame};
+use crate::decode;
 use crate::error::{Error, Result};
 use crate::frames::FrameStore;
-use crate::images::{self, ChannelHistogram};
+use crate::images::{ChannelHistogram, EncodeSpec};
 use crate::source::{RawMessage, Recording};
-
-/// A camera frame: (topic, ordinal).
-type FrameKey = (String, usize);
-/// A frame's JPEG bytes and pixel histogram.
-type Encoded = (Vec<u8>, ChannelHistogram);
-
-/// Frames decoded, resized and encoded together (bounds the raw frames held at once).
-const FRAME_BATCH: usize = 32;
 
 /// How to convert. Defaults: the rig's control rate, 320×240 JPEG at quality 90, frames staler
 /// than 1.5 periods invalidate a tick, at most 5 % invalid ticks, header stamps as time.
@@ -524,7 +515,7 @@ pub fn convert(
         .map(|t| ((t - t0) as f64 * 1e-9) as f32)
         .collect();
 
-    // Images: each chosen frame decoded once, resized and encoded, in parallel batches.
+    // Images: each chosen frame decoded once, resized and encoded, in parallel.
     let (w, h) = (opts.width, opts.height);
     let mut wanted: BTreeMap<String, BTreeSet<usize>> = BTreeMap::new();
     for (ci, cam) in rig.cameras.iter().enumerate() {
@@ -534,57 +525,26 @@ pub fn convert(
                 .map(|f| cam_ordinals[ci][f[ci]]),
         );
     }
-    let mut done: HashMap<FrameKey, Encoded> = HashMap::new();
-    let mut batch: Vec<(usize, RawMessage)> = Vec::with_capacity(FRAME_BATCH);
-    let encode = |batch: &mut Vec<(usize, RawMessage)>,
-                  done: &mut HashMap<FrameKey, Encoded>|
-     -> Result<()> {
-        let out: Vec<Result<(FrameKey, Encoded)>> = batch
-            .par_drain(..)
-            .map(|(ordinal, m)| {
-                let err = |reason: String| Error::Message {
-                    path: path.into(),
-                    topic: m.topic.clone(),
-                    log_time_ns: m.log_time_ns,
-                    reason,
-                };
-                let f: Frame = decode::frame(path, &m)?;
-                let rgb = images::to_rgb(&f).map_err(err)?;
-                let small = images::resize(&rgb, w, h).map_err(err)?;
-                let jpeg = images::jpeg(&small, opts.jpeg_quality).map_err(err)?;
-                let mut hist = ChannelHistogram::default();
-                hist.add(&small);
-                Ok(((m.topic.clone(), ordinal), (jpeg, hist)))
-            })
-            .collect();
-        for r in out {
-            let (k, v) = r?;
-            done.insert(k, v);
-        }
-        Ok(())
+    let spec = EncodeSpec {
+        width: w,
+        height: h,
+        quality: opts.jpeg_quality,
     };
-    frames_store.fetch(&wanted, &mut |_, ordinal, m| {
-        batch.push((ordinal, m));
-        if batch.len() >= FRAME_BATCH {
-            encode(&mut batch, &mut done)?;
-        }
-        Ok(())
-    })?;
-    encode(&mut batch, &mut done)?;
+    let done = frames_store.encode(path, &wanted, &spec)?;
     let mut cameras = Vec::with_capacity(rig.cameras.len());
     for (ci, cam) in rig.cameras.iter().enumerate() {
         let mut histogram = ChannelHistogram::default();
         let mut jpeg = Vec::with_capacity(frames);
         for f in &aligned.frames[..frames] {
             let ordinal = cam_ordinals[ci][f[ci]];
-            let (bytes, hist) = done.get(&(cam.topic.clone(), ordinal)).ok_or_else(|| {
+            let e = done.get(&(cam.topic.clone(), ordinal)).ok_or_else(|| {
                 reject(format!(
                     "frame {} of {} was not found on the second read",
                     ordinal, cam.topic
                 ))
             })?;
-            histogram.absorb(hist);
-            jpeg.push(bytes.clone());
+            histogram.absorb(&e.histogram);
+            jpeg.push(e.jpeg.clone());
         }
         cameras.push(CameraFrames {
             name: cam.name.clone(),

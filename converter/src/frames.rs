@@ -1,30 +1,40 @@
 //! Where camera frames come from during a conversion. Alignment needs every frame's stamp but
-//! only the frames it picks are decoded: an MCAP recording is read twice (stamps first, then
-//! only the chosen frames, streamed in bounded batches), so a multi-GB raw-image episode never
-//! sits in memory. Bags are read into memory once and served from there.
+//! only the frames it picks are decoded. An MCAP recording is read once: its small messages and
+//! every frame's stamp are kept, and the frames the conversion will pick (see
+//! [`crate::prefetch`]) are decoded, resized and encoded in parallel as they stream past, so a
+//! multi-GB raw-image episode never sits in memory; a frame that guess missed is fetched by a
+//! second read. Bags are read into memory once and served from there.
 
-use std::collections::{BTreeMap, BTreeSet};
-use std::fs::File;
-use std::io::{BufReader, Read};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
-use mcap::records::Record;
-use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use rayon::prelude::*;
 
+use crate::encode_pool::{encode_while, Encodings, FrameJob};
+use crate::episode::ConvertOptions;
 use crate::error::{Error, Result};
-use crate::source::{ros2_type_name, RawMessage, Recording, Serialization, TopicInfo};
+use crate::images::{encode_message, EncodeSpec, EncodedFrame};
+use crate::mcap_stream::{stream, stream_hashed};
+use crate::prefetch::Selector;
+use crate::source::{RawMessage, Recording, Serialization, TopicInfo};
+
+/// A camera frame: (topic, stored ordinal).
+pub type FrameKey = (String, usize);
 
 /// Stamps of a camera topic's frames and access to the frames themselves.
 pub trait FrameStore: Sync {
     /// (header stamp in ns or 0 when unreadable, log time in ns) of every frame of `topic`, in
     /// stored order; a frame's position in this list is its ordinal.
     fn stamps(&self, topic: &str) -> Vec<(u64, u64)>;
-    /// Calls `f(topic, ordinal, message)` for every wanted frame, in stored order.
-    fn fetch(
+    /// The `wanted` frames (stored ordinals per topic) of the input `path`, each decoded, resized
+    /// and JPEG-encoded per `spec`, in parallel.
+    fn encode(
         &self,
+        path: &Path,
         wanted: &BTreeMap<String, BTreeSet<usize>>,
-        f: &mut dyn FnMut(&str, usize, RawMessage) -> Result<()>,
-    ) -> Result<()>;
+        spec: &EncodeSpec,
+    ) -> Result<HashMap<FrameKey, EncodedFrame>>;
 }
 
 /// Header stamp of an image message of either serialization (0 when unreadable).
@@ -43,7 +53,8 @@ fn header_ns(m: &RawMessage) -> u64 {
     }
 }
 
-fn is_image(message_type: &str) -> bool {
+/// Whether a message type is a camera frame.
+pub(crate) fn is_image(message_type: &str) -> bool {
     matches!(
         message_type,
         "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage"
@@ -62,183 +73,211 @@ impl FrameStore for InMemory<'_> {
             .map(|m| (header_ns(m), m.log_time_ns))
             .collect()
     }
-    fn fetch(
+    fn encode(
         &self,
+        path: &Path,
         wanted: &BTreeMap<String, BTreeSet<usize>>,
-        f: &mut dyn FnMut(&str, usize, RawMessage) -> Result<()>,
-    ) -> Result<()> {
+        spec: &EncodeSpec,
+    ) -> Result<HashMap<FrameKey, EncodedFrame>> {
         let mut ordinal: BTreeMap<&str, usize> = BTreeMap::new();
+        let mut jobs = Vec::new();
         for m in &self.0.messages {
             let Some(set) = wanted.get(&m.topic) else {
                 continue;
             };
             let o = ordinal.entry(&m.topic).or_default();
             if set.contains(o) {
-                f(&m.topic, *o, m.clone())?;
+                jobs.push((*o, m));
             }
             *o += 1;
         }
-        Ok(())
+        jobs.into_par_iter()
+            .map(|(o, m)| {
+                let e = encode_message(
+                    path,
+                    &m.topic,
+                    &m.message_type,
+                    m.log_time_ns,
+                    m.serialization,
+                    &m.data,
+                    spec,
+                )?;
+                Ok(((m.topic.clone(), o), e))
+            })
+            .collect()
     }
 }
 
-/// An MCAP file's frames, read on demand.
+/// An MCAP file's frame stamps, the frames encoded during the first read, and the file to read
+/// the others from.
 pub struct McapFrames {
     path: PathBuf,
     stamps: BTreeMap<String, Vec<(u64, u64)>>,
+    /// Frames encoded during the first read, per `spec`.
+    ready: Mutex<Encodings>,
+    spec: Option<EncodeSpec>,
+}
+
+impl McapFrames {
+    /// Frames encoded during the first read and not taken yet (a diagnostic).
+    pub fn prefetched(&self) -> usize {
+        self.ready.lock().map_or(0, |r| r.len())
+    }
 }
 
 impl FrameStore for McapFrames {
     fn stamps(&self, topic: &str) -> Vec<(u64, u64)> {
         self.stamps.get(topic).cloned().unwrap_or_default()
     }
-    fn fetch(
+    fn encode(
         &self,
+        path: &Path,
         wanted: &BTreeMap<String, BTreeSet<usize>>,
-        f: &mut dyn FnMut(&str, usize, RawMessage) -> Result<()>,
-    ) -> Result<()> {
+        spec: &EncodeSpec,
+    ) -> Result<HashMap<FrameKey, EncodedFrame>> {
+        let mut out = HashMap::new();
+        let mut missing: BTreeMap<String, BTreeSet<usize>> = BTreeMap::new();
+        {
+            let mut ready = self.ready.lock().unwrap_or_else(|p| p.into_inner());
+            tracing::debug!(
+                "{}: {} frames encoded on the first read",
+                path.display(),
+                ready.len()
+            );
+            let usable = self.spec.as_ref() == Some(spec);
+            for (topic, set) in wanted {
+                for &o in set {
+                    let key = (topic.clone(), o);
+                    match ready.remove(&key).filter(|_| usable) {
+                        Some(r) => {
+                            out.insert(key, r?);
+                        }
+                        None => {
+                            missing.entry(topic.clone()).or_default().insert(o);
+                        }
+                    }
+                }
+            }
+        }
+        let mut left: usize = missing.values().map(BTreeSet::len).sum();
+        tracing::debug!(
+            "{}: {} frames used of those encoded on the first read, {left} to read again",
+            path.display(),
+            out.len()
+        );
+        if left == 0 {
+            return Ok(out);
+        }
         let mut ordinal: BTreeMap<String, usize> = BTreeMap::new();
-        stream(
-            &self.path,
-            &mut |topic: &TopicInfo, log_time_ns, data: &[u8]| {
-                let Some(set) = wanted.get(&topic.topic) else {
-                    return Ok(());
+        let (read, done) = encode_while(path, spec, |submit| {
+            stream(&self.path, &mut |topic, log_time_ns, payload, _| {
+                let Some(set) = missing.get(&topic.topic) else {
+                    return Ok(true);
                 };
                 let o = ordinal.entry(topic.topic.clone()).or_default();
-                let r = if set.contains(o) {
-                    let m = RawMessage {
-                        topic: topic.topic.clone(),
+                if set.contains(o) {
+                    submit(FrameJob {
+                        key: (topic.topic.clone(), *o),
                         message_type: topic.message_type.clone(),
                         log_time_ns,
-                        data: data.to_vec(),
-                        serialization: Serialization::Cdr,
-                    };
-                    f(&topic.topic, *o, m)
-                } else {
-                    Ok(())
-                };
-                *o += 1;
-                r
-            },
-        )
-        .map(drop)
-    }
-}
-
-/// A callback taking (topic, log time in ns, payload).
-type OnMessage<'a> = dyn FnMut(&TopicInfo, u64, &[u8]) -> Result<()> + 'a;
-/// Metadata records by name.
-type Metadata = BTreeMap<String, BTreeMap<String, String>>;
-
-/// Streams an MCAP file record by record, calling `on_message` for each message; returns the
-/// topics and metadata. Checks the `ros2` profile, `cdr` encodings and the end of the file.
-fn stream(path: &Path, on_message: &mut OnMessage<'_>) -> Result<(Vec<TopicInfo>, Metadata)> {
-    let bad = |reason: String| Error::input(path, reason);
-    let mut src = BufReader::with_capacity(1 << 20, File::open(path).map_err(Error::io(path))?);
-    let mut reader =
-        LinearReader::new_with_options(LinearReaderOptions::default().with_emit_chunks(false));
-    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
-    let mut channels: BTreeMap<u16, TopicInfo> = BTreeMap::new();
-    let mut metadata = BTreeMap::new();
-    let mut first = true;
-    while let Some(event) = reader.next_event() {
-        match event.map_err(|e| {
-            bad(format!(
-                "truncated or corrupt MCAP ({e}); try `scaledp recover`"
-            ))
-        })? {
-            LinearReadEvent::ReadRequest(n) => {
-                let got = src.read(reader.insert(n)).map_err(Error::io(path))?;
-                reader.notify_read(got);
-            }
-            LinearReadEvent::Record { data, opcode } => {
-                let record = mcap::parse_record(opcode, data)
-                    .map_err(|e| bad(format!("corrupt MCAP record: {e}")))?;
-                match record {
-                    Record::Header(h) if first && h.profile != "ros2" => {
-                        return Err(bad(format!(
-                            "MCAP profile is '{}', expected 'ros2'",
-                            h.profile
-                        )));
-                    }
-                    Record::Schema { header, .. } => {
-                        schemas.insert(header.id, ros2_type_name(&header.name));
-                    }
-                    Record::Channel(c) => {
-                        let message_type = schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                        if c.message_encoding != "cdr" && is_image(&message_type) {
-                            return Err(bad(format!(
-                                "channel {} has message encoding '{}', expected 'cdr'",
-                                c.topic, c.message_encoding
-                            )));
-                        }
-                        channels.insert(
-                            c.id,
-                            TopicInfo {
-                                topic: c.topic,
-                                message_type,
-                                count: None,
-                            },
-                        );
-                    }
-                    Record::Message { header, data } => {
-                        let info = channels.get(&header.channel_id).ok_or_else(|| {
-                            bad(format!("message on unknown channel {}", header.channel_id))
-                        })?;
-                        on_message(info, header.log_time, &data)?;
-                    }
-                    Record::Metadata(m) => {
-                        metadata.insert(m.name, m.metadata);
-                    }
-                    _ => {}
+                        bytes: payload.share(),
+                    });
+                    left -= 1;
                 }
-                first = false;
-            }
+                *o += 1;
+                Ok(left > 0)
+            })
+            .map(drop)
+        });
+        read?;
+        for (key, r) in done {
+            out.insert(key, r?);
         }
+        Ok(out)
     }
-    let mut topics: Vec<TopicInfo> = channels.into_values().collect();
-    topics.sort_by(|a, b| a.topic.cmp(&b.topic));
-    topics.dedup_by(|a, b| a.topic == b.topic);
-    Ok((topics, metadata))
 }
 
-/// First pass over an MCAP file: every wanted non-image message in full, the first message of
-/// each image topic in full (for rig detection), and the stamps of all image messages.
+/// Reads an MCAP file once: every wanted non-image message in full, the first message of each
+/// image topic in full (for rig detection), and the stamps of all image messages. With
+/// `prefetch`, the frames a conversion with those options will pick are encoded on the way.
 pub fn read_mcap_light(
     path: &Path,
-    want: &dyn Fn(&TopicInfo) -> bool,
+    want: &(dyn Fn(&TopicInfo) -> bool + Sync),
+    prefetch: Option<&ConvertOptions>,
 ) -> Result<(Recording, McapFrames)> {
+    read_mcap_hashed(path, want, prefetch, None)
+}
+
+/// [`read_mcap_light`], feeding the file's bytes to `hasher` on the way.
+pub(crate) fn read_mcap_hashed(
+    path: &Path,
+    want: &(dyn Fn(&TopicInfo) -> bool + Sync),
+    prefetch: Option<&ConvertOptions>,
+    hasher: Option<&mut blake3::Hasher>,
+) -> Result<(Recording, McapFrames)> {
+    let spec = prefetch.map(|o| EncodeSpec {
+        width: o.width,
+        height: o.height,
+        quality: o.jpeg_quality,
+    });
+    let mut selector = prefetch.map(Selector::new);
     let mut messages = Vec::new();
     let mut stamps: BTreeMap<String, Vec<(u64, u64)>> = BTreeMap::new();
-    let (topics, metadata) = stream(path, &mut |t, log_time_ns, data| {
-        if !want(t) {
-            return Ok(());
-        }
-        let m = RawMessage {
-            topic: t.topic.clone(),
-            message_type: t.message_type.clone(),
-            log_time_ns,
-            data: Vec::new(),
-            serialization: Serialization::Cdr,
-        };
-        if is_image(&t.message_type) {
-            let list = stamps.entry(t.topic.clone()).or_default();
-            let header = scaledp_schema::msg::header_stamp(data).map_or(0, |s| s.as_ns());
-            if list.is_empty() {
-                messages.push(RawMessage {
-                    data: data.to_vec(),
-                    ..m
-                });
+    let read = |submit: &mut dyn FnMut(FrameJob)| {
+        let r = stream_hashed(path, hasher, &mut |t, log_time_ns, payload, metadata| {
+            if !want(t) {
+                return Ok(true);
             }
-            list.push((header, log_time_ns));
-        } else {
-            messages.push(RawMessage {
-                data: data.to_vec(),
-                ..m
-            });
+            let header =
+                scaledp_schema::msg::header_stamp(payload.prefix()).map_or(0, |s| s.as_ns());
+            let data = || -> Result<Vec<u8>> {
+                payload
+                    .share()
+                    .with(<[u8]>::to_vec)
+                    .map_err(|e| Error::input(path, format!("corrupt MCAP chunk: {e}")))
+            };
+            let m = RawMessage {
+                topic: t.topic.clone(),
+                message_type: t.message_type.clone(),
+                log_time_ns,
+                data: Vec::new(),
+                serialization: Serialization::Cdr,
+            };
+            let mut ordinal = None;
+            if is_image(&t.message_type) {
+                let list = stamps.entry(t.topic.clone()).or_default();
+                if list.is_empty() {
+                    messages.push(RawMessage { data: data()?, ..m });
+                }
+                ordinal = Some(list.len());
+                list.push((header, log_time_ns));
+            } else {
+                messages.push(RawMessage { data: data()?, ..m });
+            }
+            if let Some(s) = &mut selector {
+                s.message(
+                    path,
+                    t,
+                    ordinal,
+                    header,
+                    log_time_ns,
+                    &payload,
+                    metadata,
+                    submit,
+                );
+            }
+            Ok(true)
+        });
+        if let (Ok(_), Some(s)) = (&r, &mut selector) {
+            s.finish(submit);
         }
-        Ok(())
-    })?;
+        r
+    };
+    let (read, ready) = match &spec {
+        Some(spec) => encode_while(path, spec, read),
+        None => (read(&mut |_| {}), HashMap::new()),
+    };
+    let (topics, metadata) = read?;
     messages.sort_by_key(|m| m.log_time_ns);
     let topics = topics.into_iter().filter(|t| want(t)).collect();
     Ok((
@@ -250,6 +289,8 @@ pub fn read_mcap_light(
         McapFrames {
             path: path.into(),
             stamps,
+            ready: Mutex::new(ready),
+            spec,
         },
     ))
 }

@@ -1,8 +1,208 @@
 //! Camera frames → RGB → resized → JPEG, plus the per-channel statistics LeRobot keeps.
 
+use std::path::Path;
+
 use fast_image_resize as fr;
+use scaledp_schema::msg::Header;
+use scaledp_schema::{CdrReader, RosMessage};
 
 use crate::decode::Frame;
+use crate::error::{Error, Result};
+use crate::resample::{lanczos3, reorder, with_resizer};
+use crate::source::{RawMessage, Serialization};
+
+/// Output size and JPEG quality of encoded frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct EncodeSpec {
+    /// Output width.
+    pub width: u32,
+    /// Output height.
+    pub height: u32,
+    /// JPEG quality (1–100).
+    pub quality: u8,
+}
+
+/// A camera frame resized and JPEG-encoded, with the histogram of its resized pixels.
+#[derive(Debug, Clone)]
+pub struct EncodedFrame {
+    /// JPEG bytes.
+    pub jpeg: Vec<u8>,
+    /// Pixel statistics of the resized frame.
+    pub histogram: ChannelHistogram,
+}
+
+/// A raw image borrowed from its message (`sensor_msgs/Image` fields, pixels not copied).
+#[derive(Debug, Clone, Copy)]
+pub struct ImageView<'a> {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// Pixel encoding, e.g. `bgra8`.
+    pub encoding: &'a str,
+    /// Bytes per row.
+    pub step: u32,
+    /// The pixels.
+    pub data: &'a [u8],
+}
+
+impl<'a> ImageView<'a> {
+    /// Parses a CDR `sensor_msgs/msg/Image` payload without copying its pixels.
+    pub fn from_cdr(payload: &'a [u8]) -> Result<Self, String> {
+        let mut r = CdrReader::new(payload).map_err(|e| e.to_string())?;
+        Header::read(&mut r).map_err(|e| e.to_string())?;
+        let height = r.u32().map_err(|e| e.to_string())?;
+        let width = r.u32().map_err(|e| e.to_string())?;
+        let encoding = r.str().map_err(|e| e.to_string())?;
+        r.u8().map_err(|e| e.to_string())?;
+        let step = r.u32().map_err(|e| e.to_string())?;
+        let data = r.bytes().map_err(|e| e.to_string())?;
+        Ok(Self {
+            width,
+            height,
+            encoding,
+            step,
+            data,
+        })
+    }
+
+    /// (bytes per pixel, source index of R, G, B) of the encoding.
+    fn layout(&self) -> Result<(usize, [usize; 3]), String> {
+        Ok(match self.encoding {
+            "rgb8" => (3, [0, 1, 2]),
+            "bgr8" => (3, [2, 1, 0]),
+            "rgba8" => (4, [0, 1, 2]),
+            "bgra8" => (4, [2, 1, 0]),
+            "mono8" => (1, [0, 0, 0]),
+            other => return Err(format!("unsupported image encoding '{other}'")),
+        })
+    }
+
+    /// Checks the size, step and data length; returns the layout.
+    fn check(&self) -> Result<(usize, [usize; 3]), String> {
+        let (channels, order) = self.layout()?;
+        let (w, h, step) = (
+            self.width as usize,
+            self.height as usize,
+            self.step as usize,
+        );
+        if w == 0 || h == 0 {
+            return Err(format!("empty image {w}×{h}"));
+        }
+        if step < w * channels {
+            return Err(format!(
+                "step {step} is smaller than width {w} × {channels} bytes"
+            ));
+        }
+        let needed = step * (h - 1) + w * channels;
+        if self.data.len() < needed {
+            return Err(format!(
+                "{} data bytes, but {h} rows of step {step} need {needed}",
+                self.data.len()
+            ));
+        }
+        Ok((channels, order))
+    }
+}
+
+/// Decodes a raw image to RGB, honouring `step` (row padding).
+pub fn view_to_rgb(img: &ImageView<'_>) -> Result<Rgb, String> {
+    let (channels, order) = img.check()?;
+    let (w, h) = (img.width as usize, img.height as usize);
+    let mut out = Vec::with_capacity(w * h * 3);
+    for row in img.data.chunks(img.step as usize).take(h) {
+        for px in row[..w * channels].chunks_exact(channels) {
+            out.extend_from_slice(&[px[order[0]], px[order[1]], px[order[2]]]);
+        }
+    }
+    Ok(Rgb {
+        width: img.width,
+        height: img.height,
+        data: out,
+    })
+}
+
+/// A raw image resized to `width × height` RGB. Rows without padding of 3- or 4-byte pixels are
+/// resized as stored (alpha ignored, never premultiplied) and only the small result is
+/// reordered to RGB: the same pixels as [`view_to_rgb`] then [`resize`], without converting the
+/// full-size frame.
+pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> Result<Rgb, String> {
+    let (channels, order) = img.check()?;
+    let (w, h) = (img.width, img.height);
+    let packed = img.step as usize == w as usize * channels;
+    let pixel = match channels {
+        3 => fr::PixelType::U8x3,
+        4 => fr::PixelType::U8x4,
+        _ => return resize(&view_to_rgb(img)?, width, height),
+    };
+    if !packed || (w, h) == (width, height) {
+        return resize(&view_to_rgb(img)?, width, height);
+    }
+    let bytes = img.step as usize * h as usize;
+    let from = fr::images::ImageRef::new(w, h, &img.data[..bytes], pixel)
+        .map_err(|e| format!("resize: {e}"))?;
+    let mut to = fr::images::Image::new(width, height, pixel);
+    let options = fr::ResizeOptions::new()
+        .resize_alg(fr::ResizeAlg::Convolution(lanczos3()))
+        .use_alpha(false);
+    with_resizer(|r| r.resize(&from, &mut to, &options)).map_err(|e| format!("resize: {e}"))?;
+    let mut data = vec![0; width as usize * height as usize * 3];
+    match (channels, order) {
+        (4, [2, 1, 0]) => reorder::<4, 2, 1, 0>(to.buffer(), &mut data),
+        (4, _) => reorder::<4, 0, 1, 2>(to.buffer(), &mut data),
+        (_, [2, 1, 0]) => reorder::<3, 2, 1, 0>(to.buffer(), &mut data),
+        _ => data.copy_from_slice(to.buffer()),
+    }
+    Ok(Rgb {
+        width,
+        height,
+        data,
+    })
+}
+
+/// Resized RGB → JPEG and histogram.
+fn finish(small: &Rgb, spec: &EncodeSpec) -> Result<EncodedFrame, String> {
+    let jpeg = jpeg(small, spec.quality)?;
+    let mut histogram = ChannelHistogram::default();
+    histogram.add(small);
+    Ok(EncodedFrame { jpeg, histogram })
+}
+
+/// One camera message of `path` (raw or compressed, either serialization) → resized JPEG and
+/// histogram. CDR raw images are read in place; others are decoded through [`crate::decode`].
+pub fn encode_message(
+    path: &Path,
+    topic: &str,
+    message_type: &str,
+    log_time_ns: u64,
+    serialization: Serialization,
+    data: &[u8],
+    spec: &EncodeSpec,
+) -> Result<EncodedFrame> {
+    let err = |reason: String| Error::Message {
+        path: path.into(),
+        topic: topic.into(),
+        log_time_ns,
+        reason,
+    };
+    let compressed = message_type.ends_with("/CompressedImage");
+    if serialization == Serialization::Cdr && !compressed {
+        let view = ImageView::from_cdr(data).map_err(err)?;
+        let small = resized_rgb(&view, spec.width, spec.height).map_err(err)?;
+        return finish(&small, spec).map_err(err);
+    }
+    let m = RawMessage {
+        topic: topic.into(),
+        message_type: message_type.into(),
+        log_time_ns,
+        data: data.to_vec(),
+        serialization,
+    };
+    let f = crate::decode::frame(path, &m)?;
+    let rgb = to_rgb(&f).map_err(err)?;
+    let small = resize(&rgb, spec.width, spec.height).map_err(err)?;
+    finish(&small, spec).map_err(err)
+}
 
 /// Tightly packed RGB8 pixels.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,44 +218,13 @@ pub struct Rgb {
 /// Decodes a frame to RGB, honouring `step` (row padding) for raw images.
 pub fn to_rgb(frame: &Frame) -> Result<Rgb, String> {
     match frame {
-        Frame::Raw(img) => {
-            let (w, h) = (img.width as usize, img.height as usize);
-            let (channels, order): (usize, [usize; 3]) = match img.encoding.as_str() {
-                "rgb8" => (3, [0, 1, 2]),
-                "bgr8" => (3, [2, 1, 0]),
-                "rgba8" => (4, [0, 1, 2]),
-                "bgra8" => (4, [2, 1, 0]),
-                "mono8" => (1, [0, 0, 0]),
-                other => return Err(format!("unsupported image encoding '{other}'")),
-            };
-            let step = img.step as usize;
-            if w == 0 || h == 0 {
-                return Err(format!("empty image {w}×{h}"));
-            }
-            if step < w * channels {
-                return Err(format!(
-                    "step {step} is smaller than width {w} × {channels} bytes"
-                ));
-            }
-            let needed = step * (h - 1) + w * channels;
-            if img.data.len() < needed {
-                return Err(format!(
-                    "{} data bytes, but {h} rows of step {step} need {needed}",
-                    img.data.len()
-                ));
-            }
-            let mut out = Vec::with_capacity(w * h * 3);
-            for row in img.data.chunks(step).take(h) {
-                for px in row[..w * channels].chunks_exact(channels) {
-                    out.extend_from_slice(&[px[order[0]], px[order[1]], px[order[2]]]);
-                }
-            }
-            Ok(Rgb {
-                width: img.width,
-                height: img.height,
-                data: out,
-            })
-        }
+        Frame::Raw(img) => view_to_rgb(&ImageView {
+            width: img.width,
+            height: img.height,
+            encoding: &img.encoding,
+            step: img.step,
+            data: &img.data,
+        }),
         Frame::Compressed(c) => {
             let img =
                 image::load_from_memory(&c.data).map_err(|e| format!("{} image: {e}", c.format))?;
@@ -77,11 +246,8 @@ pub fn resize(src: &Rgb, width: u32, height: u32) -> Result<Rgb, String> {
     let from = fr::images::ImageRef::new(src.width, src.height, &src.data, fr::PixelType::U8x3)
         .map_err(|e| format!("resize: {e}"))?;
     let mut to = fr::images::Image::new(width, height, fr::PixelType::U8x3);
-    let options =
-        fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Lanczos3));
-    fr::Resizer::new()
-        .resize(&from, &mut to, &options)
-        .map_err(|e| format!("resize: {e}"))?;
+    let options = fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(lanczos3()));
+    with_resizer(|r| r.resize(&from, &mut to, &options)).map_err(|e| format!("resize: {e}"))?;
     Ok(Rgb {
         width,
         height,
@@ -122,9 +288,21 @@ impl Default for ChannelHistogram {
 impl ChannelHistogram {
     /// Adds one frame.
     pub fn add(&mut self, rgb: &Rgb) {
-        for px in rgb.data.chunks_exact(3) {
-            for (counts, &v) in self.counts.iter_mut().zip(px) {
-                counts[v as usize] += 1;
+        // Two sets of bins, for even and odd pixels: neighbouring pixels mostly share a value,
+        // and one set would make every increment wait for the previous one.
+        let mut bins = [[0u32; 256]; 6];
+        let (even, odd) = bins.split_at_mut(3);
+        for two in rgb.data.chunks(6) {
+            for (c, &v) in two.iter().enumerate() {
+                match c {
+                    0..=2 => even[c][v as usize] += 1,
+                    _ => odd[c - 3][v as usize] += 1,
+                }
+            }
+        }
+        for (c, counts) in self.counts.iter_mut().enumerate() {
+            for (v, n) in counts.iter_mut().enumerate() {
+                *n += u64::from(even[c][v]) + u64::from(odd[c][v]);
             }
         }
         self.frames += 1;
@@ -229,6 +407,34 @@ mod tests {
         let bytes = jpeg(&small, 90).unwrap();
         let back = image::load_from_memory(&bytes).unwrap().to_rgb8();
         assert_eq!((back.width(), back.height()), (32, 24));
+    }
+
+    #[test]
+    fn fused_resize_matches_rgb_then_resize() {
+        // bgra8 and rgb8 frames resized as stored equal conversion to RGB then resizing with
+        // the library's own Lanczos3, bit for bit (cached filter and alpha left alone).
+        let (w, h) = (257u32, 131u32);
+        let px: Vec<u8> = (0..w * h * 4)
+            .map(|i| ((i * 7919) % 251) as u8 ^ (i / 1031) as u8)
+            .collect();
+        for (enc, ch) in [("bgra8", 4), ("rgba8", 4), ("bgr8", 3), ("rgb8", 3)] {
+            let data = &px[..(w * h * ch) as usize];
+            let view = ImageView {
+                width: w,
+                height: h,
+                encoding: enc,
+                step: w * ch,
+                data,
+            };
+            let fused = resized_rgb(&view, 64, 37).unwrap();
+            let rgb = view_to_rgb(&view).unwrap();
+            let from = fr::images::ImageRef::new(w, h, &rgb.data, fr::PixelType::U8x3).unwrap();
+            let mut to = fr::images::Image::new(64, 37, fr::PixelType::U8x3);
+            let options = fr::ResizeOptions::new()
+                .resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Lanczos3));
+            fr::Resizer::new().resize(&from, &mut to, &options).unwrap();
+            assert_eq!(fused.data, to.buffer(), "{enc}");
+        }
     }
 
     #[test]

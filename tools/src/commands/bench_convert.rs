@@ -21,21 +21,23 @@ const TARGET_RATIO: f64 = 10.0;
 const BASELINE_SCRIPT: &str = "tests/py/convert_baseline.py";
 
 /// What one measured child process did.
-struct Measured {
-    status: ProcessStatus,
-    wall_s: f64,
+pub(super) struct Measured {
+    pub status: ProcessStatus,
+    pub wall_s: f64,
     /// Last `VmHWM` seen (bytes); None when /proc was unreadable.
-    peak_rss: Option<u64>,
+    pub peak_rss: Option<u64>,
     /// Last user + system CPU seconds seen.
-    cpu_s: Option<f64>,
-    stdout: Vec<String>,
-    stderr: Vec<String>,
+    pub cpu_s: Option<f64>,
+    pub stdout: Vec<String>,
+    pub stderr: Vec<String>,
 }
 
 pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
     if args.episodes == 0 || !args.seconds.is_finite() || args.seconds <= 0.0 {
         bail!("need --episodes >= 1 and --seconds > 0");
     }
+    // Before our own work (generating the recordings) adds to it.
+    let load_before = load_average();
     let rig =
         Rig::load_or_builtin(&args.rig).with_context(|| format!("loading rig {}", args.rig))?;
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
@@ -169,9 +171,25 @@ pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
                     "NOT met"
                 }
             );
+            // Frames per CPU second hardly depend on what else runs on the machine; wall time
+            // does (the Python route is one thread, ours uses every core it gets).
+            if let (Some(a), Some(b)) = (ours.cpu_s, py.m.cpu_s) {
+                if a > 0.0 && b > 0.0 {
+                    let (ours_cpu, py_cpu) = (frames as f64 / a, py.frames as f64 / b);
+                    println!(
+                        "frames per CPU second: ours {ours_cpu:.1}, Python {py_cpu:.1} ({:.1}×)",
+                        ours_cpu / py_cpu
+                    );
+                }
+            }
         }
         Err(why) => println!("Python baseline skipped: {why}"),
     }
+    println!(
+        "machine load (1-minute average, {cores} cores): {} before this benchmark, {} after",
+        load_before.map_or("n/a".into(), |l| format!("{l:.2}")),
+        load_average().map_or("n/a".into(), |l| format!("{l:.2}"))
+    );
     if args.out.is_some() {
         println!(
             "recordings, dataset and python output kept in {}",
@@ -280,7 +298,7 @@ fn run_baseline(
 
 /// Runs `cmd` to the end (killing it after `timeout`), forwarding its output to stderr, and
 /// polls its peak resident set size every 20 ms.
-fn measure(mut cmd: Process, timeout: Option<Duration>) -> Result<Measured> {
+pub(super) fn measure(mut cmd: Process, timeout: Option<Duration>) -> Result<Measured> {
     let t0 = Instant::now();
     let mut child = cmd
         .stdin(Stdio::null())
@@ -333,6 +351,16 @@ fn forward<R: Read + Send + 'static>(pipe: Option<R>) -> JoinHandle<Vec<String>>
     })
 }
 
+/// The 1-minute load average, from /proc/loadavg.
+fn load_average() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
 /// `VmHWM` (peak resident set size) of a process, in bytes.
 fn vm_hwm(pid: u32) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
@@ -351,7 +379,7 @@ fn cpu_seconds(pid: u32) -> Option<f64> {
 }
 
 /// Bytes of all files under `dir` (0 when it does not exist).
-fn dir_bytes(dir: &Path) -> Result<u64> {
+pub(super) fn dir_bytes(dir: &Path) -> Result<u64> {
     if !dir.exists() {
         return Ok(0);
     }

@@ -1,0 +1,275 @@
+//! Which camera frames the conversion of an MCAP recording will pick, worked out while the file
+//! streams past, so that they are decoded, resized and encoded during the one read instead of on
+//! a second read (decompressing every camera byte again).
+//!
+//! Alignment (see [`crate::align`]) puts ticks at `start + round(k × period)`, `start` being the
+//! latest first stamp of the rig's cameras, arms and grippers, and gives each tick each camera's
+//! latest frame at or before it. So once `start` is known, frame `i` of a camera is picked only if
+//! a tick falls in `[stamp i, stamp i+1)`, which is known when frame `i + 1` arrives; the last
+//! frame is kept too. That is a superset of the frames alignment picks (it does not know where the
+//! episode ends or which ticks are trimmed). It is a guess all the same (the rig may come from
+//! the end-of-file metadata, stamps may run backwards): the conversion takes what it needs from
+//! here and reads the file again only for frames this missed.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+use crate::encode_pool::FrameJob;
+use crate::episode::ConvertOptions;
+use crate::mcap_stream::{FrameBytes, Metadata, Payload};
+use crate::source::{Recording, TopicInfo};
+
+/// Frames held per camera while `start` is unknown (a stream that never starts).
+const MAX_HELD: usize = 16;
+
+/// A camera frame not decided on yet.
+#[derive(Debug)]
+struct Candidate {
+    ordinal: usize,
+    stamp_ns: u64,
+    log_time_ns: u64,
+    message_type: String,
+    bytes: FrameBytes,
+}
+
+#[derive(Debug, Default)]
+struct Camera {
+    /// The latest frame (its successor is not known yet).
+    latest: Option<Candidate>,
+    /// Frames with their successor's stamp, waiting for `start`.
+    held: Vec<(Candidate, u64)>,
+}
+
+#[derive(Debug)]
+struct Plan {
+    use_log_time: bool,
+    period_ns: f64,
+    cameras: BTreeMap<String, Camera>,
+    /// Topics whose first stamps make `start`: cameras, arms, grippers.
+    streams: BTreeSet<String>,
+    first: BTreeMap<String, u64>,
+    /// The latest first stamp seen: `start` is at least this.
+    lower_ns: u64,
+    start_ns: Option<u64>,
+}
+
+#[derive(Debug)]
+enum State {
+    /// The rig is looked up at the first message.
+    Unresolved(Box<ConvertOptions>),
+    /// No rig known up front: every frame is left to the second read.
+    Off,
+    On(Box<Plan>),
+}
+
+/// Picks frames to encode during the read; see the module docs.
+#[derive(Debug)]
+pub struct Selector(State);
+
+impl Selector {
+    /// A selector for converting with `opts` (its rig, else the rig stored at the start of the
+    /// recording); none for a split into windows, whose ticks start elsewhere.
+    pub fn new(opts: &ConvertOptions) -> Self {
+        Self(State::Unresolved(Box::new(opts.clone())))
+    }
+
+    fn resolve(path: &Path, opts: &ConvertOptions, metadata: &Metadata) -> State {
+        if opts.window_ns.is_some() {
+            return State::Off;
+        }
+        let rec = Recording {
+            metadata: metadata.clone(),
+            ..Recording::default()
+        };
+        let rig = match (&opts.rig, crate::detect::from_metadata(path, &rec)) {
+            (Some(r), _) => r.clone(),
+            (None, Ok(Some(r))) => r,
+            _ => return State::Off,
+        };
+        let mut rig = rig;
+        if crate::detect::override_topics(path, &mut rig, &opts.topic_overrides).is_err() {
+            return State::Off;
+        }
+        let fps = opts.fps.unwrap_or(rig.control_rate_hz);
+        if !(fps.is_finite() && fps > 0.0) {
+            return State::Off;
+        }
+        let mut streams = BTreeSet::new();
+        let mut cameras = BTreeMap::new();
+        for c in &rig.cameras {
+            streams.insert(c.topic.clone());
+            cameras.insert(c.topic.clone(), Camera::default());
+        }
+        for a in &rig.arms {
+            streams.insert(a.joint_state_topic.clone());
+            if let Some(g) = &a.gripper {
+                streams.insert(g.topic.clone());
+            }
+        }
+        State::On(Box::new(Plan {
+            use_log_time: opts.use_log_time,
+            period_ns: 1e9 / fps,
+            cameras,
+            streams,
+            first: BTreeMap::new(),
+            lower_ns: 0,
+            start_ns: None,
+        }))
+    }
+
+    /// A message of `topic` (`ordinal` among that topic's image messages, None for others) with
+    /// its header stamp (0 when unreadable); frames to encode now go to `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn message(
+        &mut self,
+        path: &Path,
+        topic: &TopicInfo,
+        ordinal: Option<usize>,
+        header_ns: u64,
+        log_time_ns: u64,
+        payload: &Payload<'_>,
+        metadata: &Metadata,
+        out: &mut dyn FnMut(FrameJob),
+    ) {
+        if let State::Unresolved(opts) = &self.0 {
+            self.0 = Self::resolve(path, opts, metadata);
+        }
+        let State::On(plan) = &mut self.0 else {
+            return;
+        };
+        let stamp_ns = if plan.use_log_time || header_ns == 0 {
+            log_time_ns
+        } else {
+            header_ns
+        };
+        if plan.start_ns.is_none()
+            && plan.streams.contains(&topic.topic)
+            && !plan.first.contains_key(&topic.topic)
+        {
+            plan.first.insert(topic.topic.clone(), stamp_ns);
+            plan.lower_ns = plan.lower_ns.max(stamp_ns);
+            if plan.first.len() == plan.streams.len() {
+                plan.start_ns = Some(plan.lower_ns);
+                plan.release_held(out);
+            }
+        }
+        let Some(ordinal) = ordinal else {
+            return;
+        };
+        if !plan.cameras.contains_key(&topic.topic) {
+            return;
+        }
+        let frame = Candidate {
+            ordinal,
+            stamp_ns,
+            log_time_ns,
+            message_type: topic.message_type.clone(),
+            bytes: payload.share(),
+        };
+        let (start, lower, period) = (plan.start_ns, plan.lower_ns, plan.period_ns);
+        let Some(cam) = plan.cameras.get_mut(&topic.topic) else {
+            return;
+        };
+        if let Some(prev) = cam.latest.replace(frame) {
+            match start {
+                Some(_) if plan_picks(period, start, prev.stamp_ns, stamp_ns) => {
+                    out(job(&topic.topic, prev));
+                }
+                Some(_) => {}
+                // No tick comes before `start`, which is at least `lower`.
+                None if stamp_ns > lower => {
+                    cam.held.push((prev, stamp_ns));
+                    cam.held.retain(|(_, next)| *next > lower);
+                    if cam.held.len() > MAX_HELD {
+                        cam.held.remove(0);
+                    }
+                }
+                None => {}
+            }
+        }
+    }
+
+    /// The end of the file: each camera's last frame goes to `out` (once `start` is known).
+    pub fn finish(&mut self, out: &mut dyn FnMut(FrameJob)) {
+        let State::On(plan) = &mut self.0 else {
+            return;
+        };
+        if plan.start_ns.is_none() {
+            return;
+        }
+        for (topic, cam) in &mut plan.cameras {
+            if let Some(last) = cam.latest.take() {
+                out(job(topic, last));
+            }
+        }
+    }
+}
+
+impl Plan {
+    /// `start` just became known: decide on the frames held.
+    fn release_held(&mut self, out: &mut dyn FnMut(FrameJob)) {
+        let (period, start) = (self.period_ns, self.start_ns);
+        for (topic, cam) in &mut self.cameras {
+            for (frame, next) in std::mem::take(&mut cam.held) {
+                if plan_picks(period, start, frame.stamp_ns, next) {
+                    out(job(topic, frame));
+                }
+            }
+        }
+    }
+}
+
+fn job(topic: &str, c: Candidate) -> FrameJob {
+    FrameJob {
+        key: (topic.to_string(), c.ordinal),
+        message_type: c.message_type,
+        log_time_ns: c.log_time_ns,
+        bytes: c.bytes,
+    }
+}
+
+/// Whether a tick `start + round(k × period)`, k ≥ 0, falls in `[stamp, next)` (as
+/// [`crate::align::align`] computes ticks).
+fn plan_picks(period_ns: f64, start: Option<u64>, stamp: u64, next: u64) -> bool {
+    let Some(start) = start else {
+        return true;
+    };
+    if next <= stamp {
+        return false;
+    }
+    let tick = |k: u64| start + (k as f64 * period_ns).round() as u64;
+    let mut k = if stamp <= start {
+        0
+    } else {
+        ((stamp - start) as f64 / period_ns).ceil() as u64
+    };
+    while k > 0 && tick(k - 1) >= stamp {
+        k -= 1;
+    }
+    while tick(k) < stamp {
+        k += 1;
+    }
+    tick(k) < next
+}
+
+#[cfg(test)]
+mod tests {
+    use super::plan_picks;
+
+    #[test]
+    fn frames_covering_a_tick_are_picked() {
+        let p = 100.0; // ticks at 1000, 1100, 1200…
+        let s = Some(1000);
+        assert!(plan_picks(p, s, 990, 1010)); // covers tick 0
+        assert!(!plan_picks(p, s, 900, 1000)); // ends right at tick 0
+        assert!(plan_picks(p, s, 1000, 1001));
+        assert!(!plan_picks(p, s, 1001, 1100));
+        assert!(plan_picks(p, s, 1001, 1101));
+        assert!(plan_picks(p, s, 1150, 1450)); // covers several
+        assert!(!plan_picks(p, s, 1150, 1150));
+        // Rounding as alignment does: 1/3 period → ticks at 0, 33, 67, 100.
+        let third = 100.0 / 3.0;
+        assert!(plan_picks(third, Some(0), 34, 68));
+        assert!(!plan_picks(third, Some(0), 34, 67));
+    }
+}
