@@ -1,9 +1,7 @@
 //! Building one batch: the samples' windows, state and action rows (normalized), padding
-//! masks, and images decoded in parallel straight into the batch's contiguous buffer. In
-//! streaming mode a [`Cache`] holds the encoded images of the open episodes and lets each go
-//! after its last sample.
+//! masks, and images decoded in parallel straight into the batch's contiguous buffer (in
+//! streaming mode from the [`Cache`] of open episodes).
 
-use std::collections::HashMap;
 use std::ops::Range;
 use std::sync::Arc;
 
@@ -12,8 +10,8 @@ use rayon::prelude::*;
 use crate::decode::decode_into;
 use crate::error::{Error, Result};
 use crate::loader::Shared;
-use crate::reader::ImageColumn;
 use crate::sampler::{window, Sample};
+use crate::stream::{Cache, Open};
 
 /// One batch, contiguous and row-major.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -50,35 +48,13 @@ pub struct Batch {
     pub frame_index: Vec<i64>,
 }
 
-/// Encoded images of the open episodes (streaming mode).
-pub(crate) struct Cache {
-    open: HashMap<u32, Arc<Vec<ImageColumn>>>,
-    /// Whether position i of the order is its episode's last use (before the episode would be
-    /// read again).
-    last_use: Vec<bool>,
-    /// Most episodes open at once so far.
-    pub peak_open: usize,
-}
-
-impl Cache {
-    pub fn new(order: &[Sample], main_len: usize) -> Self {
-        let mut last_use = vec![false; order.len()];
-        for seg in [0..main_len.min(order.len()), main_len.min(order.len())..order.len()] {
-            let mut seen = std::collections::HashSet::new();
-            for i in seg.rev() {
-                last_use[i] = seen.insert(order[i].episode);
-            }
-        }
-        Cache {
-            open: HashMap::new(),
-            last_use,
-            peak_open: 0,
-        }
-    }
-}
-
 /// Builds the batch of `order[range]`.
-pub(crate) fn assemble(shared: &Shared, order: &[Sample], range: Range<usize>, cache: Option<&mut Cache>) -> Result<Batch> {
+pub(crate) fn assemble(
+    shared: &Shared,
+    order: &[Sample],
+    range: Range<usize>,
+    cache: Option<&mut Cache>,
+) -> Result<Batch> {
     let o = &shared.opts;
     let info = &shared.info;
     let samples = &order[range.clone()];
@@ -101,30 +77,18 @@ pub(crate) fn assemble(shared: &Shared, order: &[Sample], range: Range<usize>, c
         action: vec![0.0; b * c * a_dim],
         obs_is_pad: vec![false; b * to],
         action_is_pad: vec![false; b * c],
-        episode_index: samples.iter().map(|s| shared.episodes[s.episode as usize].episode_index).collect(),
+        episode_index: samples
+            .iter()
+            .map(|s| shared.episodes[s.episode as usize].episode_index)
+            .collect(),
         frame_index: samples.iter().map(|s| i64::from(s.t)).collect(),
     };
-    // Streaming: read the episodes this batch needs that are not open yet (in parallel).
+    // Streaming: read the episodes this batch needs that are not open yet.
     let mut cache = cache;
     if let Some(cache) = cache.as_deref_mut() {
-        let mut missing: Vec<u32> = samples.iter().map(|s| s.episode).filter(|e| !cache.open.contains_key(e)).collect();
-        missing.sort_unstable();
-        missing.dedup();
-        let loaded: Vec<(u32, Result<Vec<ImageColumn>>)> = shared.pool.install(|| {
-            missing
-                .par_iter()
-                .map(|&e| {
-                    let ep = &shared.episodes[e as usize];
-                    (e, shared.data.read_images(ep.file, ep.first_row..ep.first_row + ep.len, &info.cameras))
-                })
-                .collect()
-        });
-        for (e, cols) in loaded {
-            cache.open.insert(e, Arc::new(cols?));
-        }
-        cache.peak_open = cache.peak_open.max(cache.open.len());
+        cache.load(shared, samples)?;
     }
-    let open = cache.as_deref().map(|c| &c.open);
+    let open = cache.as_deref().map(Cache::open);
     shared.pool.install(|| {
         batch
             .images
@@ -134,14 +98,12 @@ pub(crate) fn assemble(shared: &Shared, order: &[Sample], range: Range<usize>, c
             .zip(batch.obs_is_pad.par_chunks_mut(to))
             .zip(batch.action_is_pad.par_chunks_mut(c))
             .zip(samples.par_iter())
-            .try_for_each(|(((((img, st), ac), op), ap), s)| fill(shared, s, open, img, st, ac, op, ap, plane))
+            .try_for_each(|(((((img, st), ac), op), ap), s)| {
+                fill(shared, s, open, img, st, ac, op, ap, plane)
+            })
     })?;
     if let Some(cache) = cache {
-        for (i, s) in range.clone().zip(samples) {
-            if cache.last_use[i] {
-                cache.open.remove(&s.episode);
-            }
-        }
+        cache.release(shared, range, samples);
     }
     Ok(batch)
 }
@@ -150,7 +112,7 @@ pub(crate) fn assemble(shared: &Shared, order: &[Sample], range: Range<usize>, c
 fn fill(
     shared: &Shared,
     s: &Sample,
-    open: Option<&HashMap<u32, Arc<Vec<ImageColumn>>>>,
+    open: Option<&Open>,
     img: &mut [u8],
     st: &mut [f32],
     ac: &mut [f32],
@@ -160,7 +122,13 @@ fn fill(
 ) -> Result<()> {
     let o = &shared.opts;
     let ep = &shared.episodes[s.episode as usize];
-    let w = window(ep.len, s.t as usize, o.obs_horizon, o.action_chunk, o.action_offset);
+    let w = window(
+        ep.len,
+        s.t as usize,
+        o.obs_horizon,
+        o.action_chunk,
+        o.action_offset,
+    );
     let (sd, ad) = (shared.data.state_dim, shared.data.action_dim);
     for (k, &f) in w.obs.iter().enumerate() {
         let row = ep.offset + f;
@@ -182,13 +150,17 @@ fn fill(
     let (lo, hi) = (w.obs[0], w.obs[w.obs.len() - 1]);
     let (cols, base) = match open {
         Some(open) => (
-            open.get(&s.episode)
-                .cloned()
-                .ok_or_else(|| Error::Stopped(format!("episode {} was not read", ep.episode_index)))?,
+            open.get(&s.episode).cloned().ok_or_else(|| {
+                Error::Stopped(format!("episode {} was not read", ep.episode_index))
+            })?,
             0,
         ),
         None => (
-            Arc::new(shared.data.read_images(ep.file, ep.first_row + lo..ep.first_row + hi + 1, cams)?),
+            Arc::new(shared.data.read_images(
+                ep.file,
+                ep.first_row + lo..ep.first_row + hi + 1,
+                cams,
+            )?),
             lo,
         ),
     };
@@ -208,7 +180,9 @@ fn fill(
                 camera: cam.clone(),
                 reason,
             };
-            let encoded = cols[ci].get(f - base).ok_or_else(|| err("no image (null)".into()))?;
+            let encoded = cols[ci]
+                .get(f - base)
+                .ok_or_else(|| err("no image (null)".into()))?;
             decode_into(encoded, width, height, &mut img[slot..slot + plane]).map_err(err)?;
         }
     }

@@ -46,7 +46,9 @@ pub fn decode_rgb(encoded: &[u8], out: &mut Vec<u8>) -> Result<(u32, u32), Strin
         }
         Ok((w, h))
     } else {
-        let img = image::load_from_memory(encoded).map_err(|e| e.to_string())?.to_rgb8();
+        let img = image::load_from_memory(encoded)
+            .map_err(|e| e.to_string())?
+            .to_rgb8();
         let (w, h) = img.dimensions();
         out.clear();
         out.extend_from_slice(img.as_raw());
@@ -55,10 +57,13 @@ pub fn decode_rgb(encoded: &[u8], out: &mut Vec<u8>) -> Result<(u32, u32), Strin
 }
 
 fn resize(src: &[u8], w: u32, h: u32, dw: u32, dh: u32, out: &mut Vec<u8>) -> Result<(), String> {
-    let src = fr::images::ImageRef::new(w, h, src, fr::PixelType::U8x3).map_err(|e| e.to_string())?;
+    let src =
+        fr::images::ImageRef::new(w, h, src, fr::PixelType::U8x3).map_err(|e| e.to_string())?;
     out.resize(dw as usize * dh as usize * 3, 0);
-    let mut dst = fr::images::Image::from_slice_u8(dw, dh, out, fr::PixelType::U8x3).map_err(|e| e.to_string())?;
-    let options = fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Bilinear));
+    let mut dst = fr::images::Image::from_slice_u8(dw, dh, out, fr::PixelType::U8x3)
+        .map_err(|e| e.to_string())?;
+    let options =
+        fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Bilinear));
     fr::Resizer::new()
         .resize(&src, &mut dst, &options)
         .map_err(|e| e.to_string())

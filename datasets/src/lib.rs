@@ -19,6 +19,7 @@ mod options;
 mod reader;
 mod sampler;
 mod store;
+mod stream;
 
 pub use batch::Batch;
 pub use error::{Error, Result};
@@ -29,6 +30,11 @@ pub use sampler::{split_episodes, window, Split, Window};
 
 /// Decodes an encoded image (JPEG or PNG) into channel-first RGB of the given size — the
 /// loader's own decoder, for benchmarks that measure the decoding limit.
-pub fn decode_image(encoded: &[u8], width: u32, height: u32, dst: &mut [u8]) -> std::result::Result<(), String> {
+pub fn decode_image(
+    encoded: &[u8],
+    width: u32,
+    height: u32,
+    dst: &mut [u8],
+) -> std::result::Result<(), String> {
     decode::decode_into(encoded, width, height, dst)
 }

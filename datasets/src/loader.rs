@@ -1,13 +1,13 @@
 //! [`Loader`]: opens a dataset, keeps this epoch's order, and hands out batches that a
 //! background thread prepares `prefetch` ahead on a rayon pool.
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use crossbeam_channel::{bounded, Receiver};
 
-use crate::batch::{self, Batch, Cache};
+use crate::batch::{self, Batch};
 use crate::error::{Error, Result};
 use crate::meta::Meta;
 use crate::normalize::{Affine, Normalizer};
@@ -15,6 +15,7 @@ use crate::options::LoaderOptions;
 use crate::reader::{Data, EpisodeRows};
 use crate::sampler::{self, Sample};
 use crate::store::Store;
+use crate::stream::Cache;
 
 /// Where a loader stands: the epoch and the samples already yielded in it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -86,6 +87,7 @@ impl Drop for Producer {
 pub struct Loader {
     shared: Arc<Shared>,
     bytes_read: Arc<AtomicU64>,
+    peak_resident: Arc<AtomicUsize>,
     epoch: u64,
     position: u64,
     order: Arc<Vec<Sample>>,
@@ -101,7 +103,10 @@ impl Loader {
             return bad("obs_horizon, action_chunk and batch_size must be at least 1".into());
         }
         if opts.world_size == 0 || opts.rank >= opts.world_size {
-            return bad(format!("rank {} of world size {}", opts.rank, opts.world_size));
+            return bad(format!(
+                "rank {} of world size {}",
+                opts.rank, opts.world_size
+            ));
         }
         if !(0.0..=1.0).contains(&opts.val_ratio) {
             return bad(format!("val_ratio {} outside [0, 1]", opts.val_ratio));
@@ -125,7 +130,10 @@ impl Loader {
                         .into_iter()
                         .find(|k| all_cams.contains(k))
                         .ok_or_else(|| {
-                            Error::format(info_file.clone(), format!("no camera {n} (cameras: {all_cams:?})"))
+                            Error::format(
+                                info_file.clone(),
+                                format!("no camera {n} (cameras: {all_cams:?})"),
+                            )
                         })
                 })
                 .collect::<Result<_>>()?,
@@ -141,20 +149,44 @@ impl Loader {
         let (width, height) = match opts.image_size {
             Some(s) => s,
             None => {
-                let shapes: Vec<&Vec<usize>> = cameras.iter().map(|c| &meta.features[c].shape).collect();
+                let shapes: Vec<&Vec<usize>> =
+                    cameras.iter().map(|c| &meta.features[c].shape).collect();
                 match shapes.first() {
                     None => (0, 0),
-                    Some(s) if s.len() == 3 && shapes.iter().all(|x| x == s) => (s[1] as u32, s[0] as u32),
-                    _ => return bad(format!("cameras of different shapes {shapes:?}: choose an image_size")),
+                    Some(s) if s.len() == 3 && shapes.iter().all(|x| x == s) => {
+                        (s[1] as u32, s[0] as u32)
+                    }
+                    _ => {
+                        return bad(format!(
+                            "cameras of different shapes {shapes:?}: choose an image_size"
+                        ))
+                    }
                 }
             }
         };
         let bytes_read = Arc::new(AtomicU64::new(0));
-        let data = Data::open(&store, &opts.state_key, &opts.action_key, bytes_read.clone())?;
+        let data = Data::open(
+            &store,
+            &opts.state_key,
+            &opts.action_key,
+            bytes_read.clone(),
+        )?;
         let stats_file = store.describe("meta/stats.json");
         let norm = Normalizer {
-            state: Affine::new(opts.state_norm, &opts.state_key, data.state_dim, &meta.stats, &stats_file)?,
-            action: Affine::new(opts.action_norm, &opts.action_key, data.action_dim, &meta.stats, &stats_file)?,
+            state: Affine::new(
+                opts.state_norm,
+                &opts.state_key,
+                data.state_dim,
+                &meta.stats,
+                &stats_file,
+            )?,
+            action: Affine::new(
+                opts.action_norm,
+                &opts.action_key,
+                data.action_dim,
+                &meta.stats,
+                &stats_file,
+            )?,
         };
         let chosen = sampler::split_episodes(
             data.episodes.len(),
@@ -209,6 +241,7 @@ impl Loader {
         let mut loader = Loader {
             shared,
             bytes_read,
+            peak_resident: Arc::new(AtomicUsize::new(0)),
             epoch: 0,
             position: 0,
             order: Arc::new(Vec::new()),
@@ -245,7 +278,14 @@ impl Loader {
         let o = &self.shared.opts;
         let (order, main_len) = match o.streaming {
             None => {
-                let idx = sampler::random_order(self.shared.samples.len(), o.shuffle, o.seed, epoch, o.rank, o.world_size);
+                let idx = sampler::random_order(
+                    self.shared.samples.len(),
+                    o.shuffle,
+                    o.seed,
+                    epoch,
+                    o.rank,
+                    o.world_size,
+                );
                 let n = idx.len();
                 (idx.into_iter().map(|i| self.shared.samples[i]).collect(), n)
             }
@@ -304,6 +344,12 @@ impl Loader {
         self.bytes_read.load(Ordering::Relaxed)
     }
 
+    /// Streaming mode: the most frames whose encoded images were held at once so far (the open
+    /// episodes of the shuffle buffer); 0 in random-access mode, which holds none between samples.
+    pub fn peak_resident_rows(&self) -> usize {
+        self.peak_resident.load(Ordering::Relaxed)
+    }
+
     /// The next batch of the epoch; `None` at its end.
     pub fn next_batch(&mut self) -> Option<Result<Batch>> {
         if self.position >= self.len() as u64 {
@@ -338,11 +384,15 @@ impl Loader {
         let (tx, rx) = bounded(self.shared.opts.prefetch.max(1));
         let stop = Arc::new(AtomicBool::new(false));
         let (shared, order, stop2) = (self.shared.clone(), self.order.clone(), stop.clone());
+        let peak = self.peak_resident.clone();
         let (start, end, main_len) = (self.position as usize, self.len(), self.main_len);
         let handle = std::thread::Builder::new()
             .name("scaledp-prefetch".into())
             .spawn(move || {
-                let mut cache = shared.opts.streaming.map(|_| Cache::new(&order, main_len));
+                let mut cache = shared
+                    .opts
+                    .streaming
+                    .map(|_| Cache::new(&order, main_len, peak));
                 let b = shared.opts.batch_size;
                 let mut p = start;
                 while p < end && !stop2.load(Ordering::Relaxed) {
@@ -363,7 +413,9 @@ impl Loader {
             },
             Err(e) => {
                 let (tx, rx) = bounded(1);
-                let _ = tx.send(Err(Error::Stopped(format!("cannot start the prefetch thread: {e}"))));
+                let _ = tx.send(Err(Error::Stopped(format!(
+                    "cannot start the prefetch thread: {e}"
+                ))));
                 Producer {
                     rx,
                     stop,

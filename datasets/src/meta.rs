@@ -78,7 +78,9 @@ impl Meta {
         }
         let stats_rel = "meta/stats.json";
         let stats = match store.read(stats_rel) {
-            Ok(bytes) => parse_stats(&bytes).map_err(|e| Error::format(store.describe(stats_rel), e))?,
+            Ok(bytes) => {
+                parse_stats(&bytes).map_err(|e| Error::format(store.describe(stats_rel), e))?
+            }
             Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
                 BTreeMap::new()
             }
@@ -102,7 +104,9 @@ impl Meta {
 }
 
 /// Flattens each statistic (nested lists for image stats) into one vector of numbers.
-fn parse_stats(bytes: &[u8]) -> std::result::Result<BTreeMap<String, BTreeMap<String, Vec<f64>>>, String> {
+fn parse_stats(
+    bytes: &[u8],
+) -> std::result::Result<BTreeMap<String, BTreeMap<String, Vec<f64>>>, String> {
     let v: serde_json::Value = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
     let obj = v.as_object().ok_or("not a JSON object")?;
     let mut out = BTreeMap::new();

@@ -44,7 +44,9 @@ impl Affine {
             let v = stats
                 .get(feature)
                 .and_then(|s| s.get(name))
-                .ok_or_else(|| Error::format(stats_file, format!("no {feature}/{name} to normalize with")))?;
+                .ok_or_else(|| {
+                    Error::format(stats_file, format!("no {feature}/{name} to normalize with"))
+                })?;
             if v.len() != dim {
                 return Err(Error::format(
                     stats_file,
@@ -62,7 +64,11 @@ impl Affine {
                     .zip(max)
                     .map(|(lo, hi)| 2.0 / (hi - lo).max(MIN_MAX_EPS))
                     .collect();
-                let offset = min.iter().zip(&scale).map(|(lo, s)| -1.0 - lo * s).collect();
+                let offset = min
+                    .iter()
+                    .zip(&scale)
+                    .map(|(lo, s)| -1.0 - lo * s)
+                    .collect();
                 (scale, offset)
             }
             Norm::MeanStd => {
@@ -168,7 +174,10 @@ mod tests {
             }
             a.invert(&mut x);
             for (got, want) in x.iter().zip(&raw) {
-                assert!((got - want).abs() <= 1e-5 * want.abs().max(1.0), "{norm:?}: {got} vs {want}");
+                assert!(
+                    (got - want).abs() <= 1e-5 * want.abs().max(1.0),
+                    "{norm:?}: {got} vs {want}"
+                );
             }
         }
     }

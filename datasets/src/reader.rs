@@ -53,10 +53,18 @@ pub(crate) struct Data {
 
 impl Data {
     /// Opens every `data/**.parquet` file and reads its small columns.
-    pub fn open(store: &Store, state_key: &str, action_key: &str, counter: Arc<AtomicU64>) -> Result<Self> {
+    pub fn open(
+        store: &Store,
+        state_key: &str,
+        action_key: &str,
+        counter: Arc<AtomicU64>,
+    ) -> Result<Self> {
         let rels = store.list("data", ".parquet")?;
         if rels.is_empty() {
-            return Err(Error::format(store.describe("data"), "no parquet data files"));
+            return Err(Error::format(
+                store.describe("data"),
+                "no parquet data files",
+            ));
         }
         let mut data = Data {
             files: Vec::new(),
@@ -92,14 +100,23 @@ impl Data {
             if w[0].episode_index == w[1].episode_index {
                 return Err(Error::format(
                     data.files[w[1].file].file.name.clone(),
-                    format!("episode {} is split across data files or row ranges", w[1].episode_index),
+                    format!(
+                        "episode {} is split across data files or row ranges",
+                        w[1].episode_index
+                    ),
                 ));
             }
         }
         Ok(data)
     }
 
-    fn read_small(&mut self, entry: &FileEntry, index: usize, state_key: &str, action_key: &str) -> Result<()> {
+    fn read_small(
+        &mut self,
+        entry: &FileEntry,
+        index: usize,
+        state_key: &str,
+        action_key: &str,
+    ) -> Result<()> {
         let name = &entry.file.name;
         let bad = |e: &dyn std::fmt::Display| Error::format(name.clone(), e);
         let schema = entry.meta.schema().clone();
@@ -112,19 +129,30 @@ impl Data {
             })
             .collect::<Result<_>>()?;
         let mask = ProjectionMask::roots(entry.meta.parquet_schema(), roots);
-        let reader = ParquetRecordBatchReaderBuilder::new_with_metadata(entry.file.clone(), entry.meta.clone())
-            .with_projection(mask)
-            .with_batch_size(8192)
-            .build()
-            .map_err(|e| bad(&e))?;
+        let reader = ParquetRecordBatchReaderBuilder::new_with_metadata(
+            entry.file.clone(),
+            entry.meta.clone(),
+        )
+        .with_projection(mask)
+        .with_batch_size(8192)
+        .build()
+        .map_err(|e| bad(&e))?;
         let mut row = 0usize;
         for batch in reader {
             let batch = batch.map_err(|e| bad(&e))?;
-            let col = |k: &str| batch.column_by_name(k).cloned().ok_or_else(|| bad(&format!("no column {k}")));
-            let ep = ints(&col("episode_index")?).map_err(|e| bad(&format!("episode_index: {e}")))?;
+            let col = |k: &str| {
+                batch
+                    .column_by_name(k)
+                    .cloned()
+                    .ok_or_else(|| bad(&format!("no column {k}")))
+            };
+            let ep =
+                ints(&col("episode_index")?).map_err(|e| bad(&format!("episode_index: {e}")))?;
             let fr = ints(&col("frame_index")?).map_err(|e| bad(&format!("frame_index: {e}")))?;
-            let sd = floats(&col(state_key)?, &mut self.state).map_err(|e| bad(&format!("{state_key}: {e}")))?;
-            let ad = floats(&col(action_key)?, &mut self.action).map_err(|e| bad(&format!("{action_key}: {e}")))?;
+            let sd = floats(&col(state_key)?, &mut self.state)
+                .map_err(|e| bad(&format!("{state_key}: {e}")))?;
+            let ad = floats(&col(action_key)?, &mut self.action)
+                .map_err(|e| bad(&format!("{action_key}: {e}")))?;
             for (dim, seen) in [(sd, &mut self.state_dim), (ad, &mut self.action_dim)] {
                 if *seen != 0 && *seen != dim {
                     return Err(bad(&format!("vector width {dim}, other files have {seen}")));
@@ -146,7 +174,9 @@ impl Data {
                     }
                     _ => {
                         if f != 0 {
-                            return Err(bad(&format!("episode {e} starts at frame_index {f}, not 0")));
+                            return Err(bad(&format!(
+                                "episode {e} starts at frame_index {f}, not 0"
+                            )));
                         }
                         self.episodes.push(EpisodeRows {
                             episode_index: e,
@@ -166,7 +196,12 @@ impl Data {
 
     /// Encoded images of rows `rows` (of one file) for the image columns `cams` (root keys):
     /// one array of `bytes` per camera, in `cams` order.
-    pub fn read_images(&self, file: usize, rows: Range<usize>, cams: &[String]) -> Result<Vec<ImageColumn>> {
+    pub fn read_images(
+        &self,
+        file: usize,
+        rows: Range<usize>,
+        cams: &[String],
+    ) -> Result<Vec<ImageColumn>> {
         let entry = &self.files[file];
         let name = &entry.file.name;
         let bad = |e: &dyn std::fmt::Display| Error::format(name.clone(), e);
@@ -187,18 +222,27 @@ impl Data {
         let mut start = rows.start;
         while start < rows.end {
             let rg = entry.rg_starts.partition_point(|&s| s <= start) - 1;
-            let rg_end = entry.rg_starts.get(rg + 1).copied().unwrap_or(rows.end).min(rows.end);
+            let rg_end = entry
+                .rg_starts
+                .get(rg + 1)
+                .copied()
+                .unwrap_or(rows.end)
+                .min(rows.end);
             let skip = start - entry.rg_starts[rg];
             let take = rg_end - start;
-            let selection = RowSelection::from(vec![RowSelector::skip(skip), RowSelector::select(take)]);
-            let reader = ParquetRecordBatchReaderBuilder::new_with_metadata(entry.file.clone(), entry.meta.clone())
-                .with_projection(ProjectionMask::leaves(pschema, leaves.iter().copied()))
-                .with_row_groups(vec![rg])
-                .with_row_selection(selection)
-                .with_row_selection_policy(RowSelectionPolicy::Selectors)
-                .with_batch_size(take.max(1))
-                .build()
-                .map_err(|e| bad(&e))?;
+            let selection =
+                RowSelection::from(vec![RowSelector::skip(skip), RowSelector::select(take)]);
+            let reader = ParquetRecordBatchReaderBuilder::new_with_metadata(
+                entry.file.clone(),
+                entry.meta.clone(),
+            )
+            .with_projection(ProjectionMask::leaves(pschema, leaves.iter().copied()))
+            .with_row_groups(vec![rg])
+            .with_row_selection(selection)
+            .with_row_selection_policy(RowSelectionPolicy::Selectors)
+            .with_batch_size(take.max(1))
+            .build()
+            .map_err(|e| bad(&e))?;
             for batch in reader {
                 let batch: RecordBatch = batch.map_err(|e| bad(&e))?;
                 for (c, cam) in cams.iter().enumerate() {
@@ -218,7 +262,9 @@ impl Data {
         }
         out.into_iter()
             .zip(cams)
-            .map(|(parts, cam)| ImageColumn::new(parts, rows.len()).map_err(|e| bad(&format!("{cam}: {e}"))))
+            .map(|(parts, cam)| {
+                ImageColumn::new(parts, rows.len()).map_err(|e| bad(&format!("{cam}: {e}")))
+            })
             .collect()
     }
 }
@@ -288,12 +334,20 @@ fn floats(a: &ArrayRef, out: &mut Vec<f32>) -> std::result::Result<usize, String
     let (values, width): (ArrayRef, usize) = match a.data_type() {
         DataType::FixedSizeList(_, w) => {
             let l = a.as_fixed_size_list();
-            (l.values().slice(l.offset() * *w as usize, l.len() * *w as usize), *w as usize)
+            (
+                l.values()
+                    .slice(l.offset() * *w as usize, l.len() * *w as usize),
+                *w as usize,
+            )
         }
         DataType::List(_) => {
             let l = a.as_list::<i32>();
             let offs = l.value_offsets();
-            let w = if l.is_empty() { 0 } else { (offs[1] - offs[0]) as usize };
+            let w = if l.is_empty() {
+                0
+            } else {
+                (offs[1] - offs[0]) as usize
+            };
             if offs.windows(2).any(|p| (p[1] - p[0]) as usize != w) {
                 return Err("rows of different lengths".into());
             }
@@ -304,7 +358,13 @@ fn floats(a: &ArrayRef, out: &mut Vec<f32>) -> std::result::Result<usize, String
     };
     match values.data_type() {
         DataType::Float32 => out.extend_from_slice(values.as_primitive::<Float32Type>().values()),
-        DataType::Float64 => out.extend(values.as_primitive::<Float64Type>().values().iter().map(|&v| v as f32)),
+        DataType::Float64 => out.extend(
+            values
+                .as_primitive::<Float64Type>()
+                .values()
+                .iter()
+                .map(|&v| v as f32),
+        ),
         other => return Err(format!("values of type {other}, expected float32")),
     }
     Ok(width)

@@ -94,7 +94,13 @@ pub struct Window {
 
 /// diffusion_policy's window for current frame `t` of an episode of `len` frames: out-of-episode
 /// steps repeat the first or last frame.
-pub fn window(len: usize, t: usize, obs_horizon: usize, action_chunk: usize, offset: usize) -> Window {
+pub fn window(
+    len: usize,
+    t: usize,
+    obs_horizon: usize,
+    action_chunk: usize,
+    offset: usize,
+) -> Window {
     let last = len.saturating_sub(1) as i64;
     let clamp = |i: i64| i.clamp(0, last) as usize;
     let first_obs = t as i64 - obs_horizon as i64 + 1;
@@ -113,7 +119,14 @@ pub fn window(len: usize, t: usize, obs_horizon: usize, action_chunk: usize, off
 /// This rank's positions in the epoch's order of `n` samples: a seeded permutation per epoch
 /// (or 0..n), padded to a multiple of `world_size` by repeating its head, then every
 /// `world_size`-th starting at `rank` (torch's DistributedSampler rule).
-pub fn random_order(n: usize, shuffle: bool, seed: u64, epoch: u64, rank: usize, world: usize) -> Vec<usize> {
+pub fn random_order(
+    n: usize,
+    shuffle: bool,
+    seed: u64,
+    epoch: u64,
+    rank: usize,
+    world: usize,
+) -> Vec<usize> {
     let mut order: Vec<usize> = (0..n).collect();
     if shuffle {
         order.shuffle(&mut rng(seed, 1 + epoch));

@@ -34,10 +34,23 @@ impl Remote {
         object_store::path::Path::from(format!("{}{rel}", self.prefix))
     }
 
-    fn err(&self, rel: &str, e: impl std::fmt::Display) -> Error {
-        Error::Store {
-            path: format!("{}/{rel}", self.url.trim_end_matches('/')),
-            reason: e.to_string(),
+    /// A missing object reads as a missing file (`stats.json` is optional); other failures keep
+    /// the store's reason on one line (servers answer with multi-line XML).
+    fn err(&self, rel: &str, e: object_store::Error) -> Error {
+        let path = format!("{}/{rel}", self.url.trim_end_matches('/'));
+        match e {
+            object_store::Error::NotFound { .. } => Error::Io {
+                path: path.into(),
+                source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such object"),
+            },
+            e => Error::Store {
+                path,
+                reason: e
+                    .to_string()
+                    .split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            },
         }
     }
 }
@@ -158,11 +171,10 @@ impl Store {
             }
             Store::Remote(r) => {
                 let key = r.key(rel);
-                let size = r
-                    .rt
-                    .block_on(r.store.head(&key))
-                    .map_err(|e| r.err(rel, e))?
-                    .size;
+                let size =
+                    r.rt.block_on(r.store.head(&key))
+                        .map_err(|e| r.err(rel, e))?
+                        .size;
                 Backing::Remote {
                     remote: r.clone(),
                     key,
@@ -229,17 +241,53 @@ impl Length for DataFile {
     }
 }
 
+/// A reader from an offset to the end of a [`DataFile`] that fetches on demand, in chunks that
+/// start small (a page header is a few bytes) and double: the parquet reader asks for one when a
+/// file has no offset index, to read a page header, and must not pull the rest of the file.
+pub(crate) struct RangeRead {
+    file: DataFile,
+    pos: u64,
+    end: u64,
+    buf: Bytes,
+    chunk: usize,
+}
+
+impl std::io::Read for RangeRead {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        if self.buf.is_empty() && self.pos < self.end {
+            let n = (self.end - self.pos).min(self.chunk as u64) as usize;
+            self.buf = self
+                .file
+                .get_bytes(self.pos, n)
+                .map_err(std::io::Error::other)?;
+            self.pos += n as u64;
+            self.chunk = (self.chunk * 2).min(1 << 20);
+        }
+        let n = out.len().min(self.buf.len());
+        out[..n].copy_from_slice(&self.buf[..n]);
+        bytes::Buf::advance(&mut self.buf, n);
+        Ok(n)
+    }
+}
+
 impl ChunkReader for DataFile {
-    type T = std::io::Cursor<Bytes>;
+    type T = RangeRead;
 
     fn get_read(&self, start: u64) -> parquet::errors::Result<Self::T> {
-        let len = self.len().saturating_sub(start);
-        let len = usize::try_from(len).map_err(|e| parquet::errors::ParquetError::External(e.into()))?;
-        self.get_bytes(start, len).map(std::io::Cursor::new)
+        Ok(RangeRead {
+            file: self.clone(),
+            pos: start,
+            end: self.len().max(start),
+            buf: Bytes::new(),
+            chunk: 512,
+        })
     }
 
     fn get_bytes(&self, start: u64, length: usize) -> parquet::errors::Result<Bytes> {
-        let ext = |e: String| parquet::errors::ParquetError::General(format!("{}: {e}", self.name));
+        let ext = |e: String| {
+            let e = e.split_whitespace().collect::<Vec<_>>().join(" ");
+            parquet::errors::ParquetError::General(format!("{}: {e}", self.name))
+        };
         self.counter.fetch_add(length as u64, Ordering::Relaxed);
         match &*self.backing {
             Backing::Local { file, .. } => {

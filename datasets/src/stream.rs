@@ -1,0 +1,99 @@
+//! Streaming mode's image memory: the encoded images of the episodes open in the shuffle buffer
+//! (see [`crate::sampler::streaming_order`]). An episode's image columns are read whole, in
+//! parallel with the other episodes a batch opens, when its first sample comes, and dropped
+//! after its last one, so what is resident is bounded by the buffer (plus the episodes a single
+//! batch opens), never by the dataset. The most rows resident at once is counted for tests and
+//! benchmarks ([`crate::Loader::peak_resident_rows`]).
+
+use std::collections::{HashMap, HashSet};
+use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::loader::Shared;
+use crate::reader::ImageColumn;
+use crate::sampler::Sample;
+
+/// Images of one open episode, one column per camera.
+pub(crate) type Open = HashMap<u32, Arc<Vec<ImageColumn>>>;
+
+/// Encoded images of the open episodes.
+pub(crate) struct Cache {
+    open: Open,
+    /// Whether position i of the order is its episode's last use (before the episode would be
+    /// read again in the padded tail of a rank's order).
+    last_use: Vec<bool>,
+    /// Rows (frames) of the open episodes.
+    resident: usize,
+    /// Most rows resident at once, shared with the loader.
+    peak: Arc<AtomicUsize>,
+}
+
+impl Cache {
+    /// A cache for `order`, whose first `main_len` samples cover each episode once and whose
+    /// rest repeats some (the padding that equalizes ranks).
+    pub fn new(order: &[Sample], main_len: usize, peak: Arc<AtomicUsize>) -> Self {
+        let mut last_use = vec![false; order.len()];
+        let cut = main_len.min(order.len());
+        for seg in [0..cut, cut..order.len()] {
+            let mut seen = HashSet::new();
+            for i in seg.rev() {
+                last_use[i] = seen.insert(order[i].episode);
+            }
+        }
+        Cache {
+            open: HashMap::new(),
+            last_use,
+            resident: 0,
+            peak,
+        }
+    }
+
+    /// Reads (in parallel on the pool) the episodes of `samples` that are not open yet.
+    pub fn load(&mut self, shared: &Shared, samples: &[Sample]) -> Result<()> {
+        if shared.info.cameras.is_empty() {
+            return Ok(());
+        }
+        let mut missing: Vec<u32> = samples
+            .iter()
+            .map(|s| s.episode)
+            .filter(|e| !self.open.contains_key(e))
+            .collect();
+        missing.sort_unstable();
+        missing.dedup();
+        let cams = &shared.info.cameras;
+        let loaded: Vec<(u32, Result<Vec<ImageColumn>>)> = shared.pool.install(|| {
+            missing
+                .par_iter()
+                .map(|&e| {
+                    let ep = &shared.episodes[e as usize];
+                    let rows = ep.first_row..ep.first_row + ep.len;
+                    (e, shared.data.read_images(ep.file, rows, cams))
+                })
+                .collect()
+        });
+        for (e, cols) in loaded {
+            self.open.insert(e, Arc::new(cols?));
+            self.resident += shared.episodes[e as usize].len;
+        }
+        self.peak.fetch_max(self.resident, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// The open episodes' images.
+    pub fn open(&self) -> &Open {
+        &self.open
+    }
+
+    /// Drops the episodes whose last sample is in `order[range]`.
+    pub fn release(&mut self, shared: &Shared, range: Range<usize>, samples: &[Sample]) {
+        for (i, s) in range.zip(samples) {
+            if self.last_use[i] && self.open.remove(&s.episode).is_some() {
+                self.resident -= shared.episodes[s.episode as usize].len;
+            }
+        }
+    }
+}
