@@ -6,4 +6,5 @@ cd "$(dirname "$0")/.."
 bash scripts/setup-python.sh
 cargo fmt --all -- --check
 cargo build --release --workspace --bins --locked
+bash scripts/build-python.sh   # the scaledp_data wheel, reusing that build
 cargo test --release --workspace --locked

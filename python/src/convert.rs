@@ -1,0 +1,86 @@
+//! Python values ↔ loader types: option strings, batches as dicts of numpy arrays, the
+//! dataset info as a dict.
+
+use numpy::{Element, PyArray1, PyArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use scaledp_datasets::{Batch, DatasetInfo, Norm, Split};
+
+/// `"train" | "val" | "all"`.
+pub fn split(s: &str) -> PyResult<Split> {
+    match s {
+        "train" => Ok(Split::Train),
+        "val" => Ok(Split::Val),
+        "all" => Ok(Split::All),
+        _ => Err(PyValueError::new_err(format!(
+            "split {s:?}: expected \"train\", \"val\" or \"all\""
+        ))),
+    }
+}
+
+/// `"min_max" | "mean_std" | "none"`.
+pub fn norm(what: &str, s: &str) -> PyResult<Norm> {
+    match s {
+        "min_max" => Ok(Norm::MinMax),
+        "mean_std" => Ok(Norm::MeanStd),
+        "none" => Ok(Norm::None),
+        _ => Err(PyValueError::new_err(format!(
+            "{what} {s:?}: expected \"min_max\", \"mean_std\" or \"none\""
+        ))),
+    }
+}
+
+/// The Python name of a normalization.
+pub fn norm_name(n: Norm) -> &'static str {
+    match n {
+        Norm::MinMax => "min_max",
+        Norm::MeanStd => "mean_std",
+        Norm::None => "none",
+    }
+}
+
+/// Moves `v` into a numpy array of `shape` (the array owns the Vec's buffer: no copy).
+pub fn array<'py, T: Element>(
+    py: Python<'py>,
+    v: Vec<T>,
+    shape: Vec<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())
+}
+
+/// A batch as the dict a training loop reads; every buffer moves into its array.
+pub fn batch_dict(py: Python<'_>, b: Batch) -> PyResult<Bound<'_, PyDict>> {
+    let (n, to, c) = (b.len, b.obs_horizon, b.action_chunk);
+    let (h, w) = (b.height as usize, b.width as usize);
+    let d = PyDict::new(py);
+    d.set_item(
+        "observation.images",
+        array(py, b.images, vec![n, to, b.cameras.len(), 3, h, w])?,
+    )?;
+    d.set_item(
+        "observation.state",
+        array(py, b.state, vec![n, to, b.state_dim])?,
+    )?;
+    d.set_item("action", array(py, b.action, vec![n, c, b.action_dim])?)?;
+    d.set_item("obs_is_pad", array(py, b.obs_is_pad, vec![n, to])?)?;
+    d.set_item("action_is_pad", array(py, b.action_is_pad, vec![n, c])?)?;
+    d.set_item("episode_index", array(py, b.episode_index, vec![n])?)?;
+    d.set_item("frame_index", array(py, b.frame_index, vec![n])?)?;
+    Ok(d)
+}
+
+/// What the loader reads, as a dict.
+pub fn info_dict<'py>(py: Python<'py>, i: &DatasetInfo) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("location", &i.location)?;
+    d.set_item("fps", i.fps)?;
+    d.set_item("cameras", &i.cameras)?;
+    d.set_item("image_size", (i.width, i.height))?;
+    d.set_item("state_names", &i.state_names)?;
+    d.set_item("action_names", &i.action_names)?;
+    d.set_item("episodes", &i.episodes)?;
+    d.set_item("frames", i.frames)?;
+    d.set_item("total_episodes", i.total_episodes)?;
+    Ok(d)
+}
