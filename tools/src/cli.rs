@@ -57,7 +57,8 @@ pub enum Command {
     /// Measure throughput and cost.
     #[command(subcommand)]
     Bench(BenchCommand),
-    /// Simulated rig + recorder on loopback: records a few short episodes and summarizes them.
+    /// The whole path on a simulated rig: records a few short episodes over loopback, converts
+    /// them into a LeRobot dataset and runs one epoch of the training-data loader.
     Demo(DemoArgs),
 }
 
@@ -291,6 +292,51 @@ pub enum BenchCommand {
     /// Convert a fixed generated set of recordings and report frames/s, MB/s and peak memory,
     /// against the usual single-process Python route.
     Convert(BenchConvertArgs),
+    /// Run the training-data loader over a generated bimanual dataset and report samples/s,
+    /// images/s, MB/s and peak memory against pure JPEG decoding and LeRobot's DataLoader.
+    Load(BenchLoadArgs),
+}
+
+/// `scaledp bench load`.
+#[derive(Debug, Args)]
+pub struct BenchLoadArgs {
+    /// Episodes of the generated dataset (bimanual_ur5_3rs, 3 cameras stored as 320×240 JPEG).
+    #[arg(long, default_value_t = 100)]
+    pub episodes: usize,
+    /// Seconds per episode (frames at the rig's 10 Hz control rate).
+    #[arg(long, default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Samples per batch.
+    #[arg(long, default_value_t = 64)]
+    pub batch_size: usize,
+    /// Decoding threads of the loader and of the pure-decode run, and LeRobot's DataLoader
+    /// workers (default: the number of cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Cache directory for the generated datasets, reused when complete (default: target/bench-load
+    /// beside the executable, else a directory in the system temp dir).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// The streaming run uses a dataset this many times larger (the generated one merged with
+    /// itself under new episode indices); 0 skips the streaming run.
+    #[arg(long, default_value_t = 4)]
+    pub streaming_factor: usize,
+    /// Episodes open at once in streaming mode.
+    #[arg(long, default_value_t = 16)]
+    pub streaming_buffer: usize,
+    /// Batches LeRobot's DataLoader is timed over (after one warm-up batch).
+    #[arg(long, default_value_t = 20)]
+    pub lerobot_batches: usize,
+    /// Skip the LeRobot baseline.
+    #[arg(long)]
+    pub no_lerobot: bool,
+    /// Internal: run one loader epoch over DATASET in this process and print JSON
+    /// (`random` or `streaming`); the benchmark measures it as a child process.
+    #[arg(long, hide = true, value_name = "MODE", requires = "dataset")]
+    pub worker: Option<String>,
+    /// Internal: the dataset of a --worker run.
+    #[arg(long, hide = true)]
+    pub dataset: Option<PathBuf>,
 }
 
 /// `scaledp bench convert`.
@@ -349,4 +395,7 @@ pub struct DemoArgs {
     /// Seed of the simulated rig.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Samples per batch of the loader epoch at the end.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..))]
+    pub batch_size: u64,
 }

@@ -1,8 +1,16 @@
-//! `scaledp demo`: the simulated rig and the recorder in one process, over loopback.
+//! `scaledp demo`: the whole path in one process — the simulated rig and the recorder over
+//! loopback, then the converter into a LeRobot dataset beside the recordings, then one epoch
+//! through the training-data loader.
 
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use scaledp_converter::{JobOptions, Outcome as Converted, Progress};
+use scaledp_datasets::LoaderOptions;
 use scaledp_recorder::{net, Outcome, RecorderOptions};
 use scaledp_schema::Rig;
 
@@ -76,9 +84,114 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
         );
     }
     println!("\nopen them in Foxglove or rerun, or: python -c \"from rosbags.highlevel import AnyReader\"");
-    Ok(if tally.lost() > 0 || tally.failed > 0 {
-        ExitStatus::DataLost
-    } else {
-        ExitStatus::Success
+
+    let recordings: Vec<PathBuf> = tally
+        .finished
+        .iter()
+        .map(|r| r.summary.path.clone())
+        .collect();
+    if recordings.is_empty() {
+        anyhow::bail!("no episode was recorded");
+    }
+    let dataset = args.out.join("dataset");
+    let converted = convert(&recordings, &dataset)?;
+    load_one_epoch(&dataset, args.batch_size as usize)?;
+    Ok(
+        if tally.lost() > 0 || tally.failed > 0 || converted < recordings.len() {
+            ExitStatus::DataLost
+        } else {
+            ExitStatus::Success
+        },
+    )
+}
+
+/// Converts this run's recordings into a fresh dataset at `dataset`; returns how many made it.
+fn convert(recordings: &[PathBuf], dataset: &Path) -> Result<usize> {
+    let bar = ProgressBar::new(recordings.len() as u64).with_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes converted {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let frames = AtomicU64::new(0);
+    let start = Instant::now();
+    let opts = JobOptions {
+        overwrite: true,
+        ..JobOptions::default()
+    };
+    let results = scaledp_converter::run(recordings, dataset, &opts, &|p| {
+        if let Progress::Done {
+            outcome, frames: f, ..
+        } = p
+        {
+            if let Converted::Failed(line) = &outcome {
+                bar.suspend(|| eprintln!("error: {line}"));
+            }
+            let total = frames.fetch_add(f as u64, Ordering::Relaxed) + f as u64;
+            bar.set_message(format!("{total} frames"));
+            bar.inc(1);
+        }
     })
+    .with_context(|| format!("converting into {}", dataset.display()))?;
+    bar.finish_and_clear();
+    let converted = results
+        .iter()
+        .filter(|(_, o)| matches!(o, Converted::Converted(_)))
+        .count();
+    for (path, o) in &results {
+        match o {
+            Converted::Skipped(why) => eprintln!("skipped {}: {why}", path.display()),
+            Converted::Failed(line) => eprintln!("failed: {line}"),
+            Converted::Converted(_) => {}
+        }
+    }
+    println!(
+        "\nconverted {converted} of {} episodes ({} frames) in {:.1} s → {} (LeRobot v3.0, 320×240 JPEG)",
+        recordings.len(),
+        frames.load(Ordering::Relaxed),
+        start.elapsed().as_secs_f64(),
+        dataset.display()
+    );
+    if converted == 0 {
+        anyhow::bail!("no episode could be converted");
+    }
+    Ok(converted)
+}
+
+/// One shuffled epoch through the loader (To 2, C 16), with a summary of what came out.
+fn load_one_epoch(dataset: &Path, batch_size: usize) -> Result<()> {
+    let start = Instant::now();
+    let mut loader = LoaderOptions::default()
+        .batch_size(batch_size)
+        .open(&dataset.to_string_lossy())
+        .with_context(|| format!("opening {}", dataset.display()))?;
+    let info = loader.info().clone();
+    let (mut samples, mut batches, mut shapes) = (0usize, 0usize, String::new());
+    let epoch = Instant::now();
+    while let Some(batch) = loader.next_batch() {
+        let b = batch?;
+        if shapes.is_empty() {
+            shapes = format!(
+                "images [{}, {}, {}, 3, {}, {}] u8, state [{}, {}, {}] f32, action [{}, {}, {}] f32 in [-1, 1]",
+                b.len, b.obs_horizon, b.cameras.len(), b.height, b.width,
+                b.len, b.obs_horizon, b.state_dim,
+                b.len, b.action_chunk, b.action_dim
+            );
+        }
+        samples += b.len;
+        batches += 1;
+    }
+    let epoch_s = epoch.elapsed().as_secs_f64();
+    println!(
+        "loader: {} episodes, {} frames, {samples} samples in {batches} batches of ≤ {batch_size}; first batch {shapes}",
+        info.episodes.len(),
+        info.frames,
+    );
+    println!(
+        "one epoch in {epoch_s:.2} s ({:.0} samples/s; opened in {:.2} s), cameras {}",
+        samples as f64 / epoch_s.max(1e-9),
+        (start.elapsed().as_secs_f64() - epoch_s).max(0.0),
+        info.cameras.join(", ")
+    );
+    Ok(())
 }

@@ -2,6 +2,8 @@
 
 mod bench;
 mod bench_convert;
+mod bench_load;
+mod bench_load_data;
 mod convert;
 mod demo;
 mod record;
@@ -26,6 +28,7 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
         }) => convert::merge(&inputs, &out, file_size_mb),
         Command::Bench(crate::cli::BenchCommand::Record(args)) => bench::record(args),
         Command::Bench(crate::cli::BenchCommand::Convert(args)) => bench_convert::run(args),
+        Command::Bench(crate::cli::BenchCommand::Load(args)) => bench_load::run(args),
         Command::Demo(args) => demo::run(args),
     }
 }

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline: the
+# LeRobotDataset + torch DataLoader route on the same dataset. Benchmarks only, never CI — it
+# pulls torch from PyPI (several GB). `scaledp bench load` finds it at .venv-bench/bin/python
+# (or set SCALEDP_BENCH_PYTHON).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+LEROBOT_VERSION=0.4.4
+if [ ! -x .venv-bench/bin/python ]; then
+  "$PY" -m venv .venv-bench
+fi
+.venv-bench/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
+.venv-bench/bin/python -m pip install --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"
+.venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
