@@ -89,14 +89,20 @@ pub(crate) fn assemble(
         cache.load(shared, samples)?;
     }
     let open = cache.as_deref().map(Cache::open);
+    // One slice per sample of each buffer, empty ones too (no cameras, a 0-wide state): a
+    // zip of `par_chunks_mut` would stop at the shortest and leave the batch unfilled.
+    let images = rows(&mut batch.images, per_sample, b);
+    let state = rows(&mut batch.state, to * s_dim, b);
+    let action = rows(&mut batch.action, c * a_dim, b);
+    let obs_pad = rows(&mut batch.obs_is_pad, to, b);
+    let act_pad = rows(&mut batch.action_is_pad, c, b);
     shared.pool.install(|| {
-        batch
-            .images
-            .par_chunks_mut(per_sample.max(1))
-            .zip(batch.state.par_chunks_mut((to * s_dim).max(1)))
-            .zip(batch.action.par_chunks_mut((c * a_dim).max(1)))
-            .zip(batch.obs_is_pad.par_chunks_mut(to))
-            .zip(batch.action_is_pad.par_chunks_mut(c))
+        images
+            .into_par_iter()
+            .zip(state)
+            .zip(action)
+            .zip(obs_pad)
+            .zip(act_pad)
             .zip(samples.par_iter())
             .try_for_each(|(((((img, st), ac), op), ap), s)| {
                 fill(shared, s, open, img, st, ac, op, ap, plane)
@@ -106,6 +112,14 @@ pub(crate) fn assemble(
         cache.release(shared, range, samples);
     }
     Ok(batch)
+}
+
+/// `buf` as `n` consecutive slices of `stride` elements (all empty when `stride` is 0).
+fn rows<T>(buf: &mut [T], stride: usize, n: usize) -> Vec<&mut [T]> {
+    if stride == 0 {
+        return (0..n).map(|_| <&mut [T]>::default()).collect();
+    }
+    buf.chunks_mut(stride).collect()
 }
 
 #[allow(clippy::too_many_arguments)]

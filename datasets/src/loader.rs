@@ -17,6 +17,41 @@ use crate::sampler::{self, Sample};
 use crate::store::Store;
 use crate::stream::Cache;
 
+/// Most frames in an observation window or action chunk, and the largest action offset.
+const MAX_WINDOW: usize = 100_000;
+/// Largest image side.
+const MAX_SIDE: u32 = 16_384;
+/// Largest image buffer of one batch (bytes).
+const MAX_BATCH_IMAGE_BYTES: u128 = 16 << 30;
+
+/// Image size and batch options that give a buffer we can allocate.
+fn check_batch_size(
+    opts: &LoaderOptions,
+    cameras: usize,
+    width: u32,
+    height: u32,
+) -> std::result::Result<(), String> {
+    if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
+        return Err(format!(
+            "image size {width}×{height}: each side must be 1 ..= {MAX_SIDE}"
+        ));
+    }
+    let bytes = [opts.batch_size, opts.obs_horizon, cameras, 3]
+        .iter()
+        .fold(u128::from(width) * u128::from(height), |a, &n| {
+            a * n as u128
+        });
+    if bytes > MAX_BATCH_IMAGE_BYTES {
+        return Err(format!(
+            "a batch of {} samples × {} frames × {cameras} cameras of {width}×{height} needs {:.1} GiB of images: use a smaller batch or image size",
+            opts.batch_size,
+            opts.obs_horizon,
+            bytes as f64 / f64::from(1u32 << 30)
+        ));
+    }
+    Ok(())
+}
+
 /// Where a loader stands: the epoch and the samples already yielded in it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct LoaderState {
@@ -96,6 +131,18 @@ pub struct Loader {
     producer: Option<Producer>,
 }
 
+impl std::fmt::Debug for Loader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Loader")
+            .field("location", &self.shared.info.location)
+            .field("episodes", &self.shared.info.episodes.len())
+            .field("samples", &self.len())
+            .field("epoch", &self.epoch)
+            .field("position", &self.position)
+            .finish_non_exhaustive()
+    }
+}
+
 impl Loader {
     pub(crate) fn open(location: &str, opts: LoaderOptions) -> Result<Self> {
         let bad = |m: String| Err(Error::Options(format!("{location}: {m}")));
@@ -106,6 +153,17 @@ impl Loader {
             return bad(format!(
                 "rank {} of world size {}",
                 opts.rank, opts.world_size
+            ));
+        }
+        if opts.obs_horizon > MAX_WINDOW
+            || opts.action_chunk > MAX_WINDOW
+            || opts.action_offset > MAX_WINDOW
+            || opts.drop_first > u32::MAX as usize
+            || opts.drop_last > u32::MAX as usize
+        {
+            return bad(format!(
+                "obs_horizon, action_chunk and action_offset must be at most {MAX_WINDOW}, drop_first and drop_last at most {}",
+                u32::MAX
             ));
         }
         if !(0.0..=1.0).contains(&opts.val_ratio) {
@@ -149,21 +207,28 @@ impl Loader {
         let (width, height) = match opts.image_size {
             Some(s) => s,
             None => {
-                let shapes: Vec<&Vec<usize>> =
-                    cameras.iter().map(|c| &meta.features[c].shape).collect();
-                match shapes.first() {
+                let sizes: Vec<Option<(u32, u32)>> = cameras
+                    .iter()
+                    .map(|c| meta.features[c].image_size())
+                    .collect();
+                match sizes.first() {
                     None => (0, 0),
-                    Some(s) if s.len() == 3 && shapes.iter().all(|x| x == s) => {
-                        (s[1] as u32, s[0] as u32)
-                    }
+                    Some(Some(s)) if sizes.iter().all(|x| *x == Some(*s)) => *s,
                     _ => {
+                        let shapes: Vec<&Vec<usize>> =
+                            cameras.iter().map(|c| &meta.features[c].shape).collect();
                         return bad(format!(
-                            "cameras of different shapes {shapes:?}: choose an image_size"
-                        ))
+                            "cameras of different or unknown shapes {shapes:?}: choose an image_size"
+                        ));
                     }
                 }
             }
         };
+        if !cameras.is_empty() {
+            if let Err(why) = check_batch_size(&opts, cameras.len(), width, height) {
+                return bad(why);
+            }
+        }
         let bytes_read = Arc::new(AtomicU64::new(0));
         let data = Data::open(
             &store,
@@ -198,6 +263,19 @@ impl Loader {
         let episodes: Vec<EpisodeRows> = chosen.iter().map(|&i| data.episodes[i].clone()).collect();
         let lens: Vec<usize> = episodes.iter().map(|e| e.len).collect();
         let samples = sampler::samples(&lens, opts.drop_first, opts.drop_last);
+        if samples.is_empty() {
+            return bad(format!(
+                "no samples: {} of {} episodes chosen ({:?} split, val_ratio {}, max_episodes {:?}), {} frames, drop_first {} / drop_last {}",
+                episodes.len(),
+                data.episodes.len(),
+                opts.split,
+                opts.val_ratio,
+                opts.max_episodes,
+                lens.iter().sum::<usize>(),
+                opts.drop_first,
+                opts.drop_last
+            ));
+        }
         let threads = if opts.threads == 0 {
             std::thread::available_parallelism().map_or(1, usize::from)
         } else {
@@ -315,14 +393,18 @@ impl Loader {
         }
     }
 
-    /// Continues from `state` (as returned by [`Loader::state`] of a loader with the same options).
+    /// Continues from `state` (as returned by [`Loader::state`] of a loader with the same
+    /// options). On an error the loader stays where it was.
     pub fn resume(&mut self, state: LoaderState) -> Result<()> {
+        let before = (self.epoch, self.position);
         self.set_epoch(state.epoch);
         if state.position > self.len() as u64 {
+            let len = self.len();
+            self.set_epoch(before.0);
+            self.position = before.1;
             return Err(Error::Options(format!(
-                "cannot resume at sample {} of an epoch of {}",
+                "cannot resume at sample {} of an epoch of {len} samples",
                 state.position,
-                self.len()
             )));
         }
         self.position = state.position;

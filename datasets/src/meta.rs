@@ -22,6 +22,30 @@ pub struct Feature {
 }
 
 impl Feature {
+    /// An image feature's (width, height): where `names` says `height` and `width` are, else
+    /// `[H, W, C]` or `[C, H, W]` told apart by which end holds 1, 3 or 4 channels.
+    pub fn image_size(&self) -> Option<(u32, u32)> {
+        let s = &self.shape;
+        if s.len() != 3 {
+            return None;
+        }
+        let named = match &self.names {
+            Some(serde_json::Value::Array(a)) => {
+                let at = |n: &str| a.iter().position(|v| v.as_str() == Some(n));
+                at("height").zip(at("width"))
+            }
+            _ => None,
+        };
+        let channels = |c: usize| matches!(c, 1 | 3 | 4);
+        let (h, w) = match named {
+            Some((h, w)) => (s[h], s[w]),
+            None if channels(s[2]) => (s[0], s[1]),
+            None if channels(s[0]) => (s[1], s[2]),
+            None => return None,
+        };
+        Some((u32::try_from(w).ok()?, u32::try_from(h).ok()?))
+    }
+
     /// The names of a vector feature's dimensions, or `dim_i`.
     pub fn dim_names(&self) -> Vec<String> {
         let n = self.shape.iter().product::<usize>();

@@ -8,16 +8,21 @@ use crate::error::{Error, Result};
 /// How a feature is normalized.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Norm {
-    /// `2 (x − min) / max(max − min, 1e-4) − 1`: [-1, 1] over the dataset's range (actions).
+    /// `2 (x − min) / (max − min) − 1`: [-1, 1] over the dataset's range (actions). A
+    /// dimension whose range is under 1e-4 (a gripper never used) is only centred, `x − min`,
+    /// as diffusion_policy's `LinearNormalizer` does, so a small deviation at deployment stays
+    /// small instead of being multiplied by 2·10⁴.
     MinMax,
-    /// `(x − mean) / (std + 1e-8)` (state).
+    /// `(x − mean) / (std + 1e-8)` (state); a dimension whose std is under 1e-4 is only
+    /// centred, `x − mean`.
     MeanStd,
     /// Values as stored.
     #[default]
     None,
 }
 
-/// Range floor of [`Norm::MinMax`], as diffusion_policy's `range_eps`.
+/// Ranges (and standard deviations) below this are not scaled, as diffusion_policy's
+/// `range_eps`.
 pub const MIN_MAX_EPS: f64 = 1e-4;
 /// Added to the standard deviation by [`Norm::MeanStd`].
 pub const MEAN_STD_EPS: f64 = 1e-8;
@@ -59,23 +64,23 @@ impl Affine {
             Norm::None => (vec![1.0; dim], vec![0.0; dim]),
             Norm::MinMax => {
                 let (min, max) = (get("min")?, get("max")?);
-                let scale: Vec<f64> = min
-                    .iter()
+                min.iter()
                     .zip(max)
-                    .map(|(lo, hi)| 2.0 / (hi - lo).max(MIN_MAX_EPS))
-                    .collect();
-                let offset = min
-                    .iter()
-                    .zip(&scale)
-                    .map(|(lo, s)| -1.0 - lo * s)
-                    .collect();
-                (scale, offset)
+                    .map(|(lo, hi)| match hi - lo {
+                        r if r >= MIN_MAX_EPS => (2.0 / r, -1.0 - lo * 2.0 / r),
+                        _ => (1.0, -lo),
+                    })
+                    .unzip()
             }
             Norm::MeanStd => {
                 let (mean, std) = (get("mean")?, get("std")?);
-                let scale: Vec<f64> = std.iter().map(|s| 1.0 / (s + MEAN_STD_EPS)).collect();
-                let offset = mean.iter().zip(&scale).map(|(m, s)| -m * s).collect();
-                (scale, offset)
+                mean.iter()
+                    .zip(std)
+                    .map(|(m, s)| match 1.0 / (s + MEAN_STD_EPS) {
+                        k if *s >= MIN_MAX_EPS => (k, -m * k),
+                        _ => (1.0, -m),
+                    })
+                    .unzip()
             }
         };
         Ok(Affine {
@@ -166,8 +171,16 @@ mod tests {
             let mut x = raw.clone();
             a.apply(&mut x);
             if norm == Norm::MinMax {
-                assert_eq!(&x[0..3], &[-1.0, -1.0, -1.0]);
+                // Dimension 1 never varies (min = max = 0.5): centred, not scaled.
+                assert_eq!(&x[0..3], &[-1.0, 0.0, -1.0]);
                 assert_eq!((x[3], x[5]), (1.0, 1.0));
+                assert_eq!((x[4], x[7]), (0.0, 0.0));
+            }
+            if norm == Norm::MeanStd {
+                // std 0: x − mean, so a deviation of 0.01 stays 0.01 (not 10⁶).
+                let mut d = vec![0.0f32, 0.51, 0.0];
+                a.apply(&mut d);
+                assert!((d[1] - 0.01).abs() < 1e-6, "{}", d[1]);
             }
             if norm == Norm::None {
                 assert_eq!(x, raw);

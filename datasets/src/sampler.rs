@@ -129,7 +129,7 @@ pub fn random_order(
 ) -> Vec<usize> {
     let mut order: Vec<usize> = (0..n).collect();
     if shuffle {
-        order.shuffle(&mut rng(seed, 1 + epoch));
+        order.shuffle(&mut rng(seed, epoch.wrapping_add(1)));
     }
     shard(order, rank, world)
 }
@@ -183,17 +183,30 @@ pub fn streaming_order(
     } = *spec;
     let world = world.max(1);
     let mut eps: Vec<usize> = (0..lens.len()).collect();
-    let mut r = rng(seed, 1 + epoch);
+    let mut r = rng(seed, epoch.wrapping_add(1));
     if shuffle {
         eps.shuffle(&mut r);
     }
-    let count = |e: &usize| lens[*e].saturating_sub(drop_first + drop_last);
+    let count = |e: &usize| lens[*e].saturating_sub(drop_first.saturating_add(drop_last));
+    // Only episodes with samples are dealt, so that empty ones do not leave a rank short.
+    eps.retain(|e| count(e) > 0);
     let per_rank: Vec<usize> = (0..world)
         .map(|k| eps.iter().skip(k).step_by(world).map(count).sum())
         .collect();
     let target = per_rank.iter().copied().max().unwrap_or(0);
-    let mine: Vec<usize> = eps.into_iter().skip(rank).step_by(world).collect();
-    let mut r = rng(seed ^ 0x5eed_5eed, (1 + epoch) * world as u64 + rank as u64);
+    let mut mine: Vec<usize> = eps.iter().copied().skip(rank).step_by(world).collect();
+    if mine.is_empty() && target > 0 {
+        // Fewer episodes than ranks: this rank repeats one of the others' (every rank must
+        // yield the same count, or a DDP collective waits forever).
+        mine.push(eps[rank % eps.len()]);
+    }
+    let mut r = rng(
+        seed ^ 0x5eed_5eed,
+        epoch
+            .wrapping_add(1)
+            .wrapping_mul(world as u64)
+            .wrapping_add(rank as u64),
+    );
     let mut out = Vec::with_capacity(target);
     let mut open: Vec<(usize, Vec<u32>)> = Vec::new();
     let mut next = mine.iter();

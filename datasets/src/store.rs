@@ -288,6 +288,16 @@ impl ChunkReader for DataFile {
             let e = e.split_whitespace().collect::<Vec<_>>().join(" ");
             parquet::errors::ParquetError::General(format!("{}: {e}", self.name))
         };
+        // Offsets come from the file's own metadata: check them before allocating.
+        if start
+            .checked_add(length as u64)
+            .is_none_or(|end| end > self.len())
+        {
+            return Err(ext(format!(
+                "a read of {length} bytes at {start} goes past the end ({} bytes): corrupt footer or page index",
+                self.len()
+            )));
+        }
         self.counter.fetch_add(length as u64, Ordering::Relaxed);
         match &*self.backing {
             Backing::Local { file, .. } => {

@@ -37,8 +37,14 @@ impl Cache {
     /// rest repeats some (the padding that equalizes ranks).
     pub fn new(order: &[Sample], main_len: usize, peak: Arc<AtomicUsize>) -> Self {
         let mut last_use = vec![false; order.len()];
-        let cut = main_len.min(order.len());
-        for seg in [0..cut, cut..order.len()] {
+        // The padded tail repeats the main part from its start, possibly more than once: each
+        // repetition is a segment of its own, so an episode is released at its last use in
+        // each, and what is open stays bounded by the buffer.
+        let cut = main_len.min(order.len()).max(1);
+        let segments = (0..order.len())
+            .step_by(cut)
+            .map(|a| a..(a + cut).min(order.len()));
+        for seg in segments {
             let mut seen = HashSet::new();
             for i in seg.rev() {
                 last_use[i] = seen.insert(order[i].episode);

@@ -7,7 +7,7 @@ use common::Fixture;
 use scaledp_datasets::LoaderOptions;
 
 fn open_err(o: LoaderOptions, location: &str) -> String {
-    let e = o.open(location).err().expect("an error").to_string();
+    let e = o.open(location).expect_err("an error").to_string();
     assert!(!e.contains('\n'), "one line: {e}");
     e
 }

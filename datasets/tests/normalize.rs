@@ -190,14 +190,22 @@ fn normalizer_round_trips_and_matches_the_formulas() {
                         stat("observation.state", "min")[d],
                         stat("observation.state", "max")[d],
                     );
-                    2.0 * (f64::from(xi) - lo) / (hi - lo).max(1e-4) - 1.0
+                    if hi - lo >= 1e-4 {
+                        2.0 * (f64::from(xi) - lo) / (hi - lo) - 1.0
+                    } else {
+                        f64::from(xi) - lo // a constant dimension is only centred
+                    }
                 }
                 Norm::MeanStd => {
                     let (m, s) = (
                         stat("observation.state", "mean")[d],
                         stat("observation.state", "std")[d],
                     );
-                    (f64::from(xi) - m) / (s + 1e-8)
+                    if s >= 1e-4 {
+                        (f64::from(xi) - m) / (s + 1e-8)
+                    } else {
+                        f64::from(xi) - m
+                    }
                 }
                 Norm::None => f64::from(xi),
             };

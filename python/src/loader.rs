@@ -118,8 +118,10 @@ impl Loader {
     }
 
     /// Starts epoch `epoch` from its first sample (its own seeded order).
-    fn set_epoch(&mut self, epoch: u64) {
-        self.inner.set_epoch(epoch);
+    fn set_epoch(&mut self, py: Python<'_>, epoch: u64) {
+        // Stopping the batch in preparation can take a while (a slow S3 read): without the GIL.
+        let inner = &mut self.inner;
+        py.detach(|| inner.set_epoch(epoch));
     }
 
     /// Where the next batch starts: `{"epoch": e, "position": samples already yielded}`.
@@ -132,7 +134,7 @@ impl Loader {
     }
 
     /// Continues from a `state_dict()` of a loader with the same options.
-    fn load_state_dict(&mut self, state: &Bound<'_, PyDict>) -> PyResult<()> {
+    fn load_state_dict(&mut self, py: Python<'_>, state: &Bound<'_, PyDict>) -> PyResult<()> {
         let get = |k: &str| -> PyResult<u64> {
             state
                 .get_item(k)?
@@ -143,7 +145,8 @@ impl Loader {
             epoch: get("epoch")?,
             position: get("position")?,
         };
-        self.inner.resume(s).map_err(to_py)
+        let inner = &mut self.inner;
+        py.detach(|| inner.resume(s)).map_err(to_py)
     }
 
     /// The state / action normalization applied to batches.
@@ -171,7 +174,7 @@ impl Loader {
             Some(Ok(b)) => Ok(Some(batch_dict(py, b)?)),
             Some(Err(e)) => Err(to_py(e)),
             None => {
-                let next = self.inner.state().epoch + 1;
+                let next = self.inner.state().epoch.wrapping_add(1);
                 self.inner.set_epoch(next);
                 Ok(None)
             }

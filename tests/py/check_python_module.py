@@ -118,9 +118,11 @@ def check_normalizer(m):
     with open(os.path.join(m["dataset"], "meta/stats.json")) as f:
         st = json.load(f)
     lo, hi = np.array(st["action"]["min"]), np.array(st["action"]["max"])
-    want_a = 2 * (raw_a - lo) / np.maximum(hi - lo, 1e-4) - 1
+    # diffusion_policy's rule: a dimension with a range (std) under 1e-4 is only centred.
+    flat = hi - lo < 1e-4
+    want_a = np.where(flat, raw_a - lo, 2 * (raw_a - lo) / np.where(flat, 1, hi - lo) - 1)
     mean, std = np.array(st["observation.state"]["mean"]), np.array(st["observation.state"]["std"])
-    want_s = (raw_s - mean) / (std + 1e-8)
+    want_s = np.where(std < 1e-4, raw_s - mean, (raw_s - mean) / (std + 1e-8))
     assert np.allclose(a, want_a, atol=1e-5), np.abs(a - want_a).max()
     assert np.allclose(s, want_s, atol=1e-4, rtol=1e-5), np.abs(s - want_s).max()
     assert (norm.action_norm, norm.state_norm) == ("min_max", "mean_std")
@@ -273,6 +275,15 @@ def check_torch(m):
         pad = len(got) - len(everything)
         assert sorted(set(got)) == everything and 0 <= pad < 2, (ctx, len(got), len(everything))
         workers[ctx] = len(got)
+    # Persistent workers never see set_epoch(): they advance one epoch per pass themselves, so
+    # two passes give two different orders, each covering the epoch.
+    pl = DataLoader(ScaleDPIterableDataset(ds, **kw), batch_size=None, num_workers=2,
+                    persistent_workers=True)
+    passes = [samples_of([np_batch(t) for t in pl]) for _ in range(2)]
+    for p in passes:
+        assert sorted(set(p)) == everything, "a persistent-worker pass misses samples"
+    assert passes[0] != passes[1], "persistent workers repeated epoch 0's order"
+    workers["persistent_passes_differ"] = True
     # DDP: two ranks over gloo on loopback take rank / world from torch.distributed.
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

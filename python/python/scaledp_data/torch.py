@@ -10,7 +10,9 @@ The loader already batches, decodes on its own thread pool and prefetches, so th
 processes add nothing but copies through shared memory. ``num_workers > 0`` works too: each
 worker then reads its own disjoint share of the samples (it acts as one more DDP rank), but
 ``state_dict()`` / ``load_state_dict()`` and the automatic epoch advance only work with
-``num_workers=0`` -- with workers call ``set_epoch(epoch)`` before every epoch.
+``num_workers=0`` -- with workers call ``set_epoch(epoch)`` before every epoch; with
+``persistent_workers=True`` the workers cannot hear it and instead advance one epoch per pass
+from the epoch set when the DataLoader started them.
 
 DDP: rank and world size come from ``torch.distributed`` when it is initialized (else 0 of 1);
 every rank yields the same number of batches. Use the same ``seed`` on every rank.
@@ -82,6 +84,9 @@ class ScaleDPIterableDataset(IterableDataset):
         self.rank, self.world_size = int(rank), int(world_size)
         self.options = dict(options)
         self.epoch = 0
+        # In a DataLoader worker: its own loader, and how many epochs it has served.
+        self._worker_loader: Optional[Loader] = None
+        self._worker_passes = 0
         # Opened here so that bad options fail at once; never pickled to workers.
         self._loader: Optional[Loader] = Loader(
             self.location, rank=self.rank, world_size=self.world_size, **self.options)
@@ -136,13 +141,19 @@ class ScaleDPIterableDataset(IterableDataset):
             return
         # A DataLoader worker process: it reads every (world_size * num_workers)-th sample of
         # the epoch's permutation, so workers and ranks never share a sample.
+        # A worker's copy of the dataset was made when the workers started: with
+        # persistent_workers it serves every epoch, and set_epoch() in the main process never
+        # reaches it, so it counts its own passes from the epoch it was created in.
         n = worker.num_workers
         options = dict(self.options)
         if options.get("threads", 0) == 0:
             options["threads"] = max(1, (os.cpu_count() or 1) // n)
-        loader = Loader(self.location, rank=self.rank * n + worker.id,
-                        world_size=self.world_size * n, **options)
-        loader.set_epoch(self.epoch)
+        if self._worker_loader is None:
+            self._worker_loader = Loader(self.location, rank=self.rank * n + worker.id,
+                                         world_size=self.world_size * n, **options)
+        loader = self._worker_loader
+        loader.set_epoch(self.epoch + self._worker_passes)
+        self._worker_passes += 1
         for batch in loader:
             yield _to_torch(batch)
 
@@ -155,4 +166,6 @@ class ScaleDPIterableDataset(IterableDataset):
     def __getstate__(self) -> Dict[str, Any]:
         state = self.__dict__.copy()
         state["_loader"] = None
+        state["_worker_loader"] = None
+        state["_worker_passes"] = 0
         return state
