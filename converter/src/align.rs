@@ -110,6 +110,9 @@ pub struct Alignment {
     pub report: AlignmentReport,
 }
 
+/// Ticks allowed per message of the busiest stream (see [`align`]).
+const MAX_TICKS_PER_MESSAGE: usize = 4;
+
 /// Aligns `cameras` and `joints` at `fps`. `Err` names the reason an episode cannot be aligned.
 pub fn align(
     cameras: &[Stream],
@@ -135,6 +138,20 @@ pub fn align(
     }
     let step_ns = 1e9 / fps;
     let n = ((end - start) as f64 / step_ns).floor() as usize + 1;
+    // Every stream has messages all through [start, end], and a tick is only valid with a recent
+    // sample of each, so a grid far denser than the busiest stream cannot be an episode: it is a
+    // stamp that jumps (clock reset, corrupt header). Refused before allocating for it.
+    let busiest = all.iter().map(|s| s.stamps_ns.len()).max().unwrap_or(0);
+    let max_ticks = busiest
+        .saturating_mul(MAX_TICKS_PER_MESSAGE)
+        .saturating_add(1000);
+    if n > max_ticks {
+        return Err(format!(
+            "the streams span {:.0} s, {n} ticks at {fps} Hz, but the busiest has only {busiest} \
+             messages (limit {MAX_TICKS_PER_MESSAGE} ticks per message + 1000): a stamp jumps",
+            (end - start) as f64 * 1e-9
+        ));
+    }
     let mut ticks = Vec::with_capacity(n);
     let mut frames = Vec::with_capacity(n);
     let mut samples = Vec::with_capacity(n);
@@ -287,5 +304,18 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!(e, "/cam has no messages");
+    }
+
+    #[test]
+    fn a_stamp_that_jumps_is_refused_before_allocating() {
+        let mut stamps = grid(0, 33.3, 30);
+        stamps.push(1_000_000_000_000_000_000); // 10^18 ns: ~32 years later
+        let cam = Stream::new("/cam", stamps.clone(), Some(30.0));
+        let joints = Stream::new("/joints", stamps, Some(30.0));
+        let e = align(&[cam], &[joints], 10.0, 1.5, 1.0).unwrap_err();
+        assert!(
+            e.contains("a stamp jumps") && e.contains("31 messages"),
+            "{e}"
+        );
     }
 }

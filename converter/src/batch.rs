@@ -308,6 +308,28 @@ fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option
     (converted, None)
 }
 
+/// [`convert_one`], a panic (a bug, never bad input) becoming a failure of this input alone
+/// instead of the end of the batch.
+fn convert_guarded(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option<String>) {
+    guarded(path, || convert_one(path, opts, hash))
+}
+
+/// Runs `f`; a panic becomes a failed outcome naming `path` (and no hash).
+fn guarded(
+    path: &Path,
+    f: impl FnOnce() -> (Converted, Option<String>),
+) -> (Converted, Option<String>) {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
+        let message = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        let line = Error::input(path, format!("internal error while converting: {message}"));
+        (Err(Outcome::Failed(line.to_string())), None)
+    })
+}
+
 /// Skips episodes the operator marked as discarded or failed.
 fn check_outcome(rec: &Recording, opts: &JobOptions) -> std::result::Result<(), Outcome> {
     let outcome = ["scaledp.episode", "scaledp.episode.start"]
@@ -367,7 +389,7 @@ pub fn run(
                     .for_each_with(tx, |tx, (i, path)| {
                         let (hash, r) = match existing.is_empty() && is_mcap_file(path) {
                             // Nothing to skip: hash the file during its one read.
-                            true => match convert_one(path, opts, true) {
+                            true => match convert_guarded(path, opts, true) {
                                 (r, Some(h)) => (Ok(h), r),
                                 (r, None) => (content_hash(path), r),
                             },
@@ -378,7 +400,7 @@ pub fn run(
                                     Ok(h) if fully_converted(&existing, h) => {
                                         Err(Outcome::Skipped("already in the dataset".into()))
                                     }
-                                    Ok(_) => convert_one(path, opts, false).0,
+                                    Ok(_) => convert_guarded(path, opts, false).0,
                                 };
                                 (hash, r)
                             }
@@ -459,4 +481,36 @@ pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mb: u64) -> Result<usize>
         }
     }
     Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn failure(r: Converted) -> String {
+        match r {
+            Err(Outcome::Failed(line)) => line,
+            Err(other) => format!("not a failure: {other:?}"),
+            Ok(_) => "converted".into(),
+        }
+    }
+
+    #[test]
+    fn a_panic_fails_that_input_alone() {
+        let path = Path::new("/data/ep7.mcap");
+        let (r, hash) = guarded(path, || panic!("index out of bounds: {}", 3));
+        let line = failure(r);
+        assert!(line.starts_with("/data/ep7.mcap: "), "{line}");
+        assert!(
+            line.ends_with("internal error while converting: index out of bounds: 3"),
+            "{line}"
+        );
+        assert!(hash.is_none());
+        let (r, _) = guarded(path, || panic!("boom"));
+        assert!(failure(r).ends_with("converting: boom"));
+        // Without a panic, the result passes through.
+        let (r, hash) = guarded(path, || (Ok(Vec::new()), Some("h".into())));
+        assert!(r.is_ok_and(|e| e.is_empty()));
+        assert_eq!(hash.as_deref(), Some("h"));
+    }
 }

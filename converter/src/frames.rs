@@ -113,12 +113,22 @@ impl FrameStore for InMemory<'_> {
 pub struct McapFrames {
     path: PathBuf,
     stamps: BTreeMap<String, Vec<(u64, u64)>>,
+    /// Per topic, the message types counted as its frames on the first read (wanted images):
+    /// a second read counts the same messages, so ordinals agree.
+    frame_types: BTreeMap<String, BTreeSet<String>>,
     /// Frames encoded during the first read, per `spec`.
     ready: Mutex<Encodings>,
     spec: Option<EncodeSpec>,
 }
 
 impl McapFrames {
+    /// Whether a message of `topic` is one of the frames [`FrameStore::stamps`] lists.
+    fn is_frame(&self, topic: &TopicInfo) -> bool {
+        self.frame_types
+            .get(&topic.topic)
+            .is_some_and(|types| types.contains(&topic.message_type))
+    }
+
     /// Frames encoded during the first read and not taken yet (a diagnostic).
     pub fn prefetched(&self) -> usize {
         self.ready.lock().map_or(0, |r| r.len())
@@ -171,7 +181,7 @@ impl FrameStore for McapFrames {
         let mut ordinal: BTreeMap<String, usize> = BTreeMap::new();
         let (read, done) = encode_while(path, spec, |submit| {
             stream(&self.path, &mut |topic, log_time_ns, payload, _| {
-                let Some(set) = missing.get(&topic.topic) else {
+                let Some(set) = missing.get(&topic.topic).filter(|_| self.is_frame(topic)) else {
                     return Ok(true);
                 };
                 let o = ordinal.entry(topic.topic.clone()).or_default();
@@ -223,6 +233,7 @@ pub(crate) fn read_mcap_hashed(
     let mut selector = prefetch.map(Selector::new);
     let mut messages = Vec::new();
     let mut stamps: BTreeMap<String, Vec<(u64, u64)>> = BTreeMap::new();
+    let mut frame_types: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     let read = |submit: &mut dyn FnMut(FrameJob)| {
         let r = stream_hashed(path, hasher, &mut |t, log_time_ns, payload, metadata| {
             if !want(t) {
@@ -245,6 +256,13 @@ pub(crate) fn read_mcap_hashed(
             };
             let mut ordinal = None;
             if is_image(&t.message_type) {
+                if !frame_types
+                    .get(&t.topic)
+                    .is_some_and(|s| s.contains(&t.message_type))
+                {
+                    let types = frame_types.entry(t.topic.clone()).or_default();
+                    types.insert(t.message_type.clone());
+                }
                 let list = stamps.entry(t.topic.clone()).or_default();
                 if list.is_empty() {
                     messages.push(RawMessage { data: data()?, ..m });
@@ -289,6 +307,7 @@ pub(crate) fn read_mcap_hashed(
         McapFrames {
             path: path.into(),
             stamps,
+            frame_types,
             ready: Mutex::new(ready),
             spec,
         },

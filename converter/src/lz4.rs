@@ -1,9 +1,13 @@
 //! LZ4 frame decoding (<https://github.com/lz4/lz4/blob/dev/doc/lz4_Frame_format.md>) straight
 //! into a caller's buffer, block by block with `lz4_flex`, without verifying the frame's XXH32
-//! checksums. An MCAP chunk carries its own CRC of the uncompressed records; the frame checksum
-//! cost more CPU than the decompression itself (camera chunks of 11 MB compress ~20×, and their
-//! decoding runs at memory speed), and it guards against nothing a bounds-checked decoder does not
-//! already reject or the chunk CRC would not catch.
+//! checksums: they cost more CPU than the decompression itself (camera chunks of 11 MB compress
+//! ~20×, and their decoding runs at memory speed). An MCAP chunk carries its own CRC-32 of the
+//! uncompressed records, which [`crate::mcap_stream`] checks instead (when the chunk header
+//! records one, i.e. it is non-zero): over the whole chunk before any of its messages is handed
+//! out, except for a chunk whose large last message is left compressed ([`Tail`]). There the CRC
+//! is finished each time that message is decoded, and a mismatch fails the decode; its
+//! messages before it are handed out unverified, and if the last message is never decoded (a
+//! frame the conversion does not pick), that chunk's CRC is never checked.
 
 const FRAME_MAGIC: u32 = 0x184D_2204;
 /// Skippable frames: magic 0x184D2A50..=0x184D2A5F, then a 4-byte length.
@@ -149,6 +153,14 @@ pub struct Tail {
     decoder: Decoder,
     /// The record's bytes, relative to `base`.
     range: std::ops::Range<usize>,
+    /// The CRC-32 state over the chunk's bytes before `base + head.len()`, and the CRC the
+    /// whole chunk must have.
+    crc: Option<(crc32fast::Hasher, u32)>,
+}
+
+/// The reason for a chunk whose records have CRC-32 `computed` where its header says `recorded`.
+pub fn crc_mismatch(computed: u32, recorded: u32) -> String {
+    format!("CRC-32 of its records is {computed:#010x}, its header says {recorded:#010x}")
 }
 
 impl Tail {
@@ -168,7 +180,14 @@ impl Tail {
             rest,
             decoder,
             range: range.start - base..range.end - base,
+            crc: None,
         }
+    }
+
+    /// Checks, at each decode, that the output ends with CRC-32 `crc`, `hasher` having been fed
+    /// the output up to the position this tail was deferred at.
+    pub fn check_crc(&mut self, hasher: crc32fast::Hasher, crc: u32) {
+        self.crc = Some((hasher, crc));
     }
 
     /// The record's bytes decoded so far.
@@ -202,6 +221,14 @@ impl Tail {
                 "lz4: input ends {} bytes short of the record's end",
                 n - pos
             ));
+        }
+        if let Some((hasher, crc)) = &self.crc {
+            let mut hasher = hasher.clone();
+            hasher.update(&out[self.head.len()..]);
+            let computed = hasher.finalize();
+            if computed != *crc {
+                return Err(crc_mismatch(computed, *crc));
+            }
         }
         Ok(f(&out[self.range.clone()]))
     }

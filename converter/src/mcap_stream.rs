@@ -1,6 +1,7 @@
 //! Streams a ros2-profile MCAP file message by message in one forward read. Each chunk is
 //! decompressed into a recycled buffer (LZ4 with [`crate::lz4`], so no XXH32 checksum is
-//! computed; zstd; or none) and messages are handed out borrowed from it, so a camera frame is
+//! computed; zstd; or none), its records checked against the chunk's CRC-32 (see [`crate::lz4`]
+//! for the one exception), and messages are handed out borrowed from it, so a camera frame is
 //! never copied: a caller that keeps one (to encode it on another thread) keeps a
 //! reference-counted handle on the chunk instead.
 //!
@@ -23,7 +24,7 @@ use mcap::records::{op, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use crate::error::{Error, Result};
-use crate::lz4::{Decoder, Tail};
+use crate::lz4::{crc_mismatch, Decoder, Tail};
 use crate::source::{ros2_type_name, TopicInfo};
 
 /// A chunk's last message is left compressed when it is at least this large.
@@ -147,6 +148,10 @@ impl Reader<'_> {
         on_message: &mut OnMessage<'_>,
     ) -> Result<bool> {
         let first = std::mem::replace(&mut self.first, false);
+        if opcode == op::CHUNK && at.is_some() {
+            // Chunks hold messages, schemas and channels only; nesting would recurse.
+            return Err(self.bad("corrupt MCAP chunk: a chunk record inside a chunk"));
+        }
         if opcode == op::MESSAGE {
             // channel id u16, sequence u32, log time u64, publish time u64, then the payload.
             if bytes.len() < 22 {
@@ -207,17 +212,20 @@ impl Reader<'_> {
             Record::Chunk { header, data } => {
                 let n = usize::try_from(header.uncompressed_size)
                     .map_err(|_| self.bad("corrupt MCAP chunk: too large"))?;
-                return self.chunk(&header.compression, &data, n, on_message);
+                let crc = header.uncompressed_crc;
+                return self.chunk(&header.compression, crc, &data, n, on_message);
             }
             _ => {}
         }
         Ok(true)
     }
 
-    /// A chunk of `n` bytes of records, compressed as `compression` in `data`.
+    /// A chunk of `n` bytes of records, compressed as `compression` in `data`, whose records
+    /// have CRC-32 `crc` (0: none recorded).
     fn chunk(
         &mut self,
         compression: &str,
+        crc: u32,
         data: &[u8],
         n: usize,
         on_message: &mut OnMessage<'_>,
@@ -262,12 +270,30 @@ impl Reader<'_> {
             )));
         }
         self.buffers.give_back(&chunk);
+        // The CRC covers all `n` bytes: checked now, or for a chunk whose last message is left
+        // compressed, over the bytes decoded so far now and the rest when (if) it is decoded.
+        let mut crc_state = None;
+        if crc != 0 {
+            let mut hasher = crc32fast::Hasher::new();
+            hasher.update(chunk.get(..wrote.min(n)).unwrap_or_default());
+            if tail.is_some() {
+                crc_state = Some(hasher);
+            } else {
+                let computed = hasher.finalize();
+                if computed != crc {
+                    return Err(corrupt(crc_mismatch(computed, crc)));
+                }
+            }
+        }
         if !self.chunk_records(&chunk, end, on_message)? {
             return Ok(false);
         }
-        let Some((at, tail)) = tail else {
+        let Some((at, mut tail)) = tail else {
             return Ok(true);
         };
+        if let Some(hasher) = crc_state {
+            tail.check_crc(hasher, crc);
+        }
         // The deferred message: its record header and message header are in the prefix.
         let Some(head) = chunk.get(at..at + 9 + 22) else {
             return Err(corrupt("truncated record".into()));
@@ -341,7 +367,9 @@ fn lz4_records(
         if end == n && opcode == op::MESSAGE && end - at >= DEFER_MIN && pos < end {
             let payload = at + 9 + 22;
             pos = decoder.decode(src, out, pos, payload + PREFIX)?;
-            if pos < end {
+            // Deferred only once the prefix is out: input that ends before it is truncated
+            // (and is reported as too few bytes below).
+            if pos >= payload + PREFIX && pos < end {
                 let tail = Tail::defer(&decoder, src, out, pos, payload..end);
                 return Ok((pos, Some((at, tail))));
             }
@@ -386,10 +414,20 @@ pub fn stream_hashed(
     on_message: &mut OnMessage<'_>,
 ) -> Result<(Vec<TopicInfo>, Metadata)> {
     let file = File::open(path).map_err(Error::io(path))?;
+    let len = file.metadata().map_err(Error::io(path))?.len();
     let hashing = hasher.is_some();
     let mut src = BufReader::with_capacity(1 << 20, Hashing { file, hasher });
-    let mut linear =
-        LinearReader::new_with_options(LinearReaderOptions::default().with_emit_chunks(true));
+    // No record is longer than the file, nor than the largest chunk we accept compressed (LZ4
+    // and zstd grow incompressible data by well under 1/64): a corrupt length is refused before
+    // anything is allocated for it.
+    let limit = usize::try_from(len)
+        .unwrap_or(usize::MAX)
+        .min(MAX_CHUNK + MAX_CHUNK / 64);
+    let mut linear = LinearReader::new_with_options(
+        LinearReaderOptions::default()
+            .with_emit_chunks(true)
+            .with_record_length_limit(limit),
+    );
     let mut reader = Reader {
         path,
         schemas: BTreeMap::new(),
@@ -427,134 +465,4 @@ pub fn stream_hashed(
 }
 
 #[cfg(test)]
-mod tests {
-    #![allow(clippy::unwrap_used)]
-    use super::*;
-
-    /// (topic, log time, payload) of the messages written: every third a small one, the others
-    /// large "frames", so that most 3 MiB chunks end with a frame.
-    fn messages() -> Messages {
-        (0..12u64)
-            .map(|i| {
-                let (topic, len) = match i % 3 {
-                    0 => ("/arm", 100 + i as usize),
-                    _ => ("/cam", (1 << 20) + 12_345 * i as usize),
-                };
-                // Compressible, but different per message.
-                let data = (0..len)
-                    .map(|k| ((k / 7) as u64 ^ i.wrapping_mul(31)) as u8)
-                    .collect();
-                (topic.to_string(), 1_000 + i, data)
-            })
-            .collect()
-    }
-
-    fn file_of(compression: Option<mcap::Compression>) -> (tempfile::NamedTempFile, Messages) {
-        let sent = messages();
-        let mut f = tempfile::NamedTempFile::new().unwrap();
-        let mut w = mcap::WriteOptions::new()
-            .profile("ros2")
-            .compression(compression)
-            .chunk_size(Some(3 << 20))
-            .create(std::io::BufWriter::new(f.as_file_mut()))
-            .unwrap();
-        let image = w
-            .add_schema("sensor_msgs/msg/Image", "ros2msg", b"")
-            .unwrap();
-        let joints = w
-            .add_schema("sensor_msgs/msg/JointState", "ros2msg", b"")
-            .unwrap();
-        let cam = w
-            .add_channel(image, "/cam", "cdr", &BTreeMap::new())
-            .unwrap();
-        let arm = w
-            .add_channel(joints, "/arm", "cdr", &BTreeMap::new())
-            .unwrap();
-        for (i, (topic, log, data)) in sent.iter().enumerate() {
-            let header = mcap::records::MessageHeader {
-                channel_id: if topic == "/cam" { cam } else { arm },
-                sequence: i as u32,
-                log_time: *log,
-                publish_time: *log,
-            };
-            w.write_to_known_channel(&header, data).unwrap();
-        }
-        w.finish().unwrap();
-        drop(w);
-        (f, sent)
-    }
-
-    /// (topic, log time, payload) per message.
-    type Messages = Vec<(String, u64, Vec<u8>)>;
-
-    /// The messages of `path` and how many were left compressed.
-    fn read_all(path: &Path) -> Result<(Messages, usize)> {
-        let mut got = Vec::new();
-        let mut deferred = 0;
-        stream(path, &mut |t, log, payload, _| {
-            deferred += usize::from(matches!(payload, Payload::Deferred(_)));
-            let prefix = payload.prefix().to_vec();
-            let data = payload.share().with(<[u8]>::to_vec).unwrap();
-            assert!(data.starts_with(&prefix));
-            got.push((t.topic.clone(), log, data));
-            Ok(true)
-        })?;
-        Ok((got, deferred))
-    }
-
-    #[test]
-    fn every_compression_reads_back_what_was_written() {
-        for c in [
-            None,
-            Some(mcap::Compression::Lz4),
-            Some(mcap::Compression::Zstd),
-        ] {
-            let (f, sent) = file_of(c);
-            let (got, deferred) = read_all(f.path()).unwrap();
-            assert_eq!(got, sent, "{c:?}");
-            // Only LZ4 chunks leave their large last message compressed.
-            assert_eq!(
-                deferred > 0,
-                matches!(c, Some(mcap::Compression::Lz4)),
-                "{c:?}"
-            );
-        }
-    }
-
-    #[test]
-    fn the_hash_taken_on_the_way_is_the_content_hash() {
-        let (f, _) = file_of(Some(mcap::Compression::Lz4));
-        let mut h = blake3::Hasher::new();
-        h.update(f.path().file_name().unwrap().as_encoded_bytes());
-        stream_hashed(f.path(), Some(&mut h), &mut |_, _, _, _| Ok(true)).unwrap();
-        let on_the_way = h.finalize().to_hex().to_string();
-        assert_eq!(on_the_way, crate::content_hash(f.path()).unwrap());
-    }
-
-    #[test]
-    fn truncated_and_corrupt_files_are_errors() {
-        let (f, _) = file_of(Some(mcap::Compression::Lz4));
-        let bytes = std::fs::read(f.path()).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let cut = dir.path().join("cut.mcap");
-        std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
-        let e = read_all(&cut).unwrap_err().to_string();
-        assert!(e.contains("cut.mcap") && e.contains("recover"), "{e}");
-        // Flip bytes inside the compressed data of the first chunk (well past its header).
-        let mut bad = bytes.clone();
-        let at = bytes
-            .windows(4)
-            .position(|w| w == [0x04, 0x22, 0x4D, 0x18])
-            .unwrap();
-        for b in &mut bad[at + 200..at + 260] {
-            *b ^= 0x5A;
-        }
-        let bad_path = dir.path().join("bad.mcap");
-        std::fs::write(&bad_path, &bad).unwrap();
-        match read_all(&bad_path) {
-            Err(e) => assert!(e.to_string().contains("bad.mcap"), "{e}"),
-            // A flip that still decodes yields other bytes, never a panic.
-            Ok((got, _)) => assert_eq!(got.len(), 12),
-        }
-    }
-}
+mod tests;

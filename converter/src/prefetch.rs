@@ -237,17 +237,31 @@ fn plan_picks(period_ns: f64, start: Option<u64>, stamp: u64, next: u64) -> bool
     if next <= stamp {
         return false;
     }
-    let tick = |k: u64| start + (k as f64 * period_ns).round() as u64;
+    // Saturating: near u64::MAX a tick stays at the end of time instead of wrapping to 0.
+    let tick = |k: u64| start.saturating_add((k as f64 * period_ns).round() as u64);
     let mut k = if stamp <= start {
         0
     } else {
         ((stamp - start) as f64 / period_ns).ceil() as u64
     };
+    // The estimate is off by float rounding only, a step or two. Should it not settle within
+    // `MAX_STEPS` (a period below the float resolution of the stamps), the frame is picked: the
+    // plan only has to be a superset.
+    const MAX_STEPS: usize = 64;
+    let mut steps = 0;
     while k > 0 && tick(k - 1) >= stamp {
         k -= 1;
+        steps += 1;
+        if steps > MAX_STEPS {
+            return true;
+        }
     }
     while tick(k) < stamp {
-        k += 1;
+        k = k.saturating_add(1);
+        steps += 1;
+        if steps > MAX_STEPS {
+            return true;
+        }
     }
     tick(k) < next
 }
@@ -271,5 +285,30 @@ mod tests {
         let third = 100.0 / 3.0;
         assert!(plan_picks(third, Some(0), 34, 68));
         assert!(!plan_picks(third, Some(0), 34, 67));
+    }
+
+    /// Calls `plan_picks` on another thread; None if it has not returned within 10 s.
+    fn picks_in_time(period: f64, start: u64, stamp: u64, next: u64) -> Option<bool> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(plan_picks(period, Some(start), stamp, next));
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(10)).ok()
+    }
+
+    #[test]
+    fn stamps_near_the_end_of_time_neither_wrap_nor_hang() {
+        let period = 1e9 / 30.0;
+        let start = u64::MAX - 100;
+        // The next tick lies past u64::MAX: none in [stamp, next).
+        let r = picks_in_time(period, start, u64::MAX - 50, u64::MAX);
+        assert_eq!(r, Some(false));
+        // A tick well inside the range still counts.
+        let start = u64::MAX - 1_000_000_000;
+        let r = picks_in_time(period, start, start + 50_000_000, start + 90_000_000);
+        assert_eq!(r, Some(true));
+        // A period below the stamps' float resolution: settles (picking the frame) or answers.
+        let r = picks_in_time(1e-6, 1 << 62, (1 << 62) + 7, (1 << 62) + 9);
+        assert!(r.is_some());
     }
 }

@@ -228,3 +228,77 @@ fn episode_with_rig(
     let ahead = frames.prefetched();
     (convert(path, &rec, &frames, opts).unwrap(), ahead)
 }
+
+/// A 16×16 bgra8 frame of one gray level `v`, stamped `stamp_ns`.
+fn small_frame(v: u8, stamp_ns: u64) -> Vec<u8> {
+    Image {
+        header: Header {
+            stamp: Time::from_ns(stamp_ns),
+            frame_id: "cam".into(),
+        },
+        height: 16,
+        width: 16,
+        encoding: "bgra8".into(),
+        is_bigendian: 0,
+        step: 64,
+        data: vec![v; 16 * 16 * 4],
+    }
+    .to_cdr()
+}
+
+#[test]
+fn frames_read_again_are_counted_like_the_first_read() {
+    use scaledp_converter::images::{encode_message, EncodeSpec};
+    use scaledp_converter::Serialization;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("shared_topic.mcap");
+    // "/cam" carries images and, on a second channel, messages of a type the read does not
+    // want: they are not frames, on the first read or the second.
+    let mut w = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(BufWriter::new(std::fs::File::create(&path).unwrap()))
+        .unwrap();
+    let image = w
+        .add_schema("sensor_msgs/msg/Image", "ros2msg", b"")
+        .unwrap();
+    let text = w.add_schema("std_msgs/msg/String", "ros2msg", b"").unwrap();
+    let none = BTreeMap::new();
+    let cam = w.add_channel(image, "/cam", "cdr", &none).unwrap();
+    let other = w.add_channel(text, "/cam", "cdr", &none).unwrap();
+    let mut frames = Vec::new();
+    for k in 0..3u64 {
+        let log = T0 + k * 100_000_000;
+        for (ch, data) in [
+            (other, b"\0\x01\0\0\x04\0\0\0abc\0".to_vec()),
+            (cam, small_frame(40 + 80 * k as u8, log)),
+        ] {
+            let header = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: k as u32,
+                log_time: log,
+                publish_time: log,
+            };
+            w.write_to_known_channel(&header, &data).unwrap();
+        }
+        frames.push((log, small_frame(40 + 80 * k as u8, log)));
+    }
+    w.finish().unwrap();
+    drop(w);
+
+    let (_, store) = read_mcap_light(&path, &useful, None).unwrap();
+    assert_eq!(store.stamps("/cam").len(), 3);
+    let spec = EncodeSpec {
+        width: 8,
+        height: 8,
+        quality: 90,
+    };
+    let wanted = BTreeMap::from([("/cam".to_string(), (0..3).collect())]);
+    let got = store.encode(&path, &wanted, &spec).unwrap();
+    for (k, (log, data)) in frames.iter().enumerate() {
+        let topic = "/cam";
+        let image = "sensor_msgs/msg/Image";
+        let want =
+            encode_message(&path, topic, image, *log, Serialization::Cdr, data, &spec).unwrap();
+        assert_eq!(got[&(topic.to_string(), k)].jpeg, want.jpeg, "frame {k}");
+    }
+}
