@@ -72,7 +72,7 @@ pub(crate) fn assemble(
         width: info.width,
         state_dim: s_dim,
         action_dim: a_dim,
-        images: vec![0; b * per_sample],
+        images: shared.spare.take(b * per_sample),
         state: vec![0.0; b * to * s_dim],
         action: vec![0.0; b * c * a_dim],
         obs_is_pad: vec![false; b * to],

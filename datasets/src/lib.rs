@@ -23,7 +23,7 @@ mod stream;
 
 pub use batch::Batch;
 pub use error::{Error, Result};
-pub use loader::{DatasetInfo, Loader, LoaderState};
+pub use loader::{DatasetInfo, ImagePool, Loader, LoaderState};
 pub use normalize::{Affine, Norm, Normalizer};
 pub use options::LoaderOptions;
 pub use sampler::{split_episodes, window, Split, Window};

@@ -166,56 +166,88 @@ fn bytes_read(ds: &common::Written) -> (u64, u64) {
 
 #[test]
 fn random_access_reads_only_the_pages_of_a_sample() {
-    // Noisy 64×48 JPEGs (several KB each): pages of the converter's 64 KiB limit hold a few
-    // frames, an episode's image column many pages.
-    let fx = Fixture {
-        lens: vec![150, 150],
-        episodes_per_file: 2,
-        cameras: vec![("top".into(), 64, 48), ("wrist".into(), 64, 48)],
-        png: false,
-        noise: true,
-        ..Fixture::default()
-    };
-    let ds = common::write(&fx);
-    let path = ds.root.join(&ds.files[0]);
-    let file_size = std::fs::metadata(&path).unwrap().len();
-    let page = largest_image_page(&path);
-    let (at_open, per_sample) = bytes_read(&ds);
-    eprintln!(
-        "file {file_size} B, largest image page {page} B: opening read {at_open} B, \
-         random access {per_sample} B per sample (To 2, 1 of 2 cameras)"
-    );
-    // A window of 2 frames lies in at most 2 pages of the one camera read.
-    assert!(
-        per_sample <= 2 * page,
-        "{per_sample} B per sample, pages of {page} B"
-    );
-    assert!(
-        per_sample * 20 < file_size,
-        "{per_sample} B per sample of a {file_size} B file"
-    );
-    // Opening reads the footer and small columns, not the images.
-    assert!(
-        at_open * 5 < file_size,
-        "opening read {at_open} of {file_size} B"
-    );
+    // Noisy 64×48 JPEGs (several KB each), in the converter's layout (a page per frame) and in
+    // one with 64 KiB pages holding a few frames each (other writers).
+    for big_pages in [false, true] {
+        let fx = Fixture {
+            lens: vec![150, 150],
+            episodes_per_file: 2,
+            cameras: vec![("top".into(), 64, 48), ("wrist".into(), 64, 48)],
+            png: false,
+            noise: true,
+            big_pages,
+            ..Fixture::default()
+        };
+        let ds = common::write(&fx);
+        let path = ds.root.join(&ds.files[0]);
+        let file_size = std::fs::metadata(&path).unwrap().len();
+        let page = largest_image_page(&path);
+        let (at_open, per_sample) = bytes_read(&ds);
+        eprintln!(
+            "big pages {big_pages}: file {file_size} B, largest image page {page} B: opening read \
+             {at_open} B, random access {per_sample} B per sample (To 2, 1 of 2 cameras)"
+        );
+        // A window of 2 frames lies in at most 2 pages of the one camera read.
+        assert!(
+            per_sample <= 2 * page,
+            "{per_sample} B per sample, pages of {page} B"
+        );
+        assert!(
+            per_sample * 20 < file_size,
+            "{per_sample} B per sample of a {file_size} B file"
+        );
+        // Opening reads the footer and small columns, not the images.
+        assert!(
+            at_open * 5 < file_size,
+            "opening read {at_open} of {file_size} B"
+        );
+        if !big_pages {
+            // A page per frame: about the 2 images the sample uses (frames of 64×48 noise are
+            // 2–3 KB; 2 KB of slack for page headers and the odd larger frame).
+            let images = file_size / 600; // 2 cameras × 300 frames
+            assert!(
+                per_sample <= 2 * images + 2048,
+                "{per_sample} B per sample, images of ~{images} B"
+            );
+        }
 
-    // Without an offset index (pyarrow's default) page headers are read to find the rows, but
-    // not the pages in between.
-    let ds = common::write(&Fixture {
-        page_index: false,
-        ..fx
-    });
-    let (at_open, per_sample) = bytes_read(&ds);
-    eprintln!(
-        "without page index: opening read {at_open} B, random access {per_sample} B per sample"
-    );
-    assert!(
-        per_sample * 10 < file_size,
-        "{per_sample} B per sample of a {file_size} B file"
-    );
-    assert!(
-        at_open * 5 < file_size,
-        "opening read {at_open} of {file_size} B"
-    );
+        // Without an offset index (pyarrow's default) page headers are read to find the rows,
+        // but not the pages in between.
+        let ds = common::write(&Fixture {
+            page_index: false,
+            ..fx
+        });
+        let (at_open, per_sample) = bytes_read(&ds);
+        eprintln!(
+            "without page index: opening read {at_open} B, random access {per_sample} B per sample"
+        );
+        assert!(
+            per_sample * 10 < file_size,
+            "{per_sample} B per sample of a {file_size} B file"
+        );
+        assert!(
+            at_open * 5 < file_size,
+            "opening read {at_open} of {file_size} B"
+        );
+    }
+}
+
+#[test]
+fn recycled_buffers_give_the_same_batches() {
+    let ds = three_cameras();
+    // 15 samples in batches of 4: the last one is shorter than the buffer handed back.
+    let opts = LoaderOptions::default().batch_size(4).seed(4).threads(2);
+    let mut fresh = opts.clone().open(&ds.location()).unwrap();
+    let want: Vec<_> = fresh.iter().map(Result::unwrap).collect();
+    let mut reused = opts.open(&ds.location()).unwrap();
+    for epoch in 0..2 {
+        reused.set_epoch(0);
+        let mut got = Vec::new();
+        while let Some(b) = reused.next_batch() {
+            let b = b.unwrap();
+            got.push(b.clone());
+            reused.recycle(b);
+        }
+        assert_eq!(got, want, "pass {epoch}");
+    }
 }

@@ -1,11 +1,12 @@
 //! Python values ↔ loader types: option strings, batches as dicts of numpy arrays, the
 //! dataset info as a dict.
 
-use numpy::{Element, PyArray1, PyArrayMethods};
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{Element, PyArray1, PyArrayDyn, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use scaledp_datasets::{Batch, DatasetInfo, Norm, Split};
+use scaledp_datasets::{Batch, DatasetInfo, ImagePool, Norm, Split};
 
 /// `"train" | "val" | "all"`.
 pub fn split(s: &str) -> PyResult<Split> {
@@ -49,14 +50,51 @@ pub fn array<'py, T: Element>(
     Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())
 }
 
-/// A batch as the dict a training loop reads; every buffer moves into its array.
-pub fn batch_dict(py: Python<'_>, b: Batch) -> PyResult<Bound<'_, PyDict>> {
+/// The owner of a batch's image buffer while numpy arrays view it; when the last of them is
+/// freed, the buffer goes back to the loader's [`ImagePool`] instead of to the allocator, so the
+/// next batch reuses its pages (fresh pages for every 88 MB batch cost ~12 % of the loader).
+#[pyclass(frozen, module = "scaledp_data")]
+struct ImageBuffer {
+    array: ArrayD<u8>,
+    pool: ImagePool,
+}
+
+impl Drop for ImageBuffer {
+    fn drop(&mut self) {
+        let (v, _) = std::mem::take(&mut self.array).into_raw_vec_and_offset();
+        self.pool.put(v);
+    }
+}
+
+/// `images` as a numpy array of `shape` viewing the buffer in place (no copy), owned by an
+/// [`ImageBuffer`] that hands it back to `pool` once Python frees it.
+fn image_array<'py>(
+    py: Python<'py>,
+    images: Vec<u8>,
+    shape: Vec<usize>,
+    pool: ImagePool,
+) -> PyResult<Bound<'py, PyAny>> {
+    let array = ArrayD::from_shape_vec(IxDyn(&shape), images)
+        .map_err(|e| PyValueError::new_err(format!("batch images: {e}")))?;
+    let owner = Bound::new(py, ImageBuffer { array, pool })?;
+    let view = &owner.get().array;
+    // SAFETY: `owner` becomes the array's base object, so it lives as long as the array; and the
+    // ImageBuffer is frozen (no Python or Rust code gets `&mut` to it before its Drop), so the
+    // buffer is never reallocated while the array views it.
+    #[allow(unsafe_code)]
+    let a = unsafe { PyArrayDyn::borrow_from_array(view, owner.clone().into_any()) };
+    Ok(a.into_any())
+}
+
+/// A batch as the dict a training loop reads; every buffer moves into its array (images into
+/// one whose buffer returns to `pool` when freed).
+pub fn batch_dict(py: Python<'_>, b: Batch, pool: ImagePool) -> PyResult<Bound<'_, PyDict>> {
     let (n, to, c) = (b.len, b.obs_horizon, b.action_chunk);
     let (h, w) = (b.height as usize, b.width as usize);
     let d = PyDict::new(py);
     d.set_item(
         "observation.images",
-        array(py, b.images, vec![n, to, b.cameras.len(), 3, h, w])?,
+        image_array(py, b.images, vec![n, to, b.cameras.len(), 3, h, w], pool)?,
     )?;
     d.set_item(
         "observation.state",

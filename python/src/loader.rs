@@ -171,7 +171,7 @@ impl Loader {
     fn __next__<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let inner = &mut self.inner;
         match py.detach(|| inner.next_batch()) {
-            Some(Ok(b)) => Ok(Some(batch_dict(py, b)?)),
+            Some(Ok(b)) => Ok(Some(batch_dict(py, b, self.inner.image_pool())?)),
             Some(Err(e)) => Err(to_py(e)),
             None => {
                 let next = self.inner.state().epoch.wrapping_add(1);

@@ -56,11 +56,13 @@ def same_batch(d, batch, spec, what):
 
 
 def owned_by_rust(a):
-    """The array's memory belongs to the Rust Vec the loader filled (no copy was made)."""
+    """The array's memory belongs to the Rust Vec the loader filled (no copy was made): held by
+    numpy's container for a Vec, or, for images, by the ImageBuffer that hands the Vec back to
+    the loader's pool when the array is freed."""
     base = a
     while isinstance(base.base, np.ndarray):
         base = base.base
-    return not a.flags.owndata and type(base.base).__name__ == "PySliceContainer"
+    return not a.flags.owndata and type(base.base).__name__ in ("PySliceContainer", "ImageBuffer")
 
 
 def check_config(m, c):
@@ -75,12 +77,19 @@ def check_config(m, c):
     equal = 0
     for e in epochs:
         assert loader.epoch == e["epoch"] and loader.state_dict()["position"] == 0
-        got = list(loader)  # the rest of the epoch; the loader then moves to the next one
-        assert len(got) == len(e["batches"]), f"{c['name']} epoch {e['epoch']}: {len(got)} batches"
-        for i, (b, spec) in enumerate(zip(got, e["batches"])):
-            same_batch(d, b, spec, f"{c['name']} epoch {e['epoch']} batch {i}")
+        # The rest of the epoch (the loader then moves to the next one), each batch dropped
+        # before the next: its image buffer goes back to the pool and later batches reuse it.
+        n = 0
+        for i, b in enumerate(loader):
+            assert i < len(e["batches"]), f"{c['name']} epoch {e['epoch']}: too many batches"
+            same_batch(d, b, e["batches"][i], f"{c['name']} epoch {e['epoch']} batch {i}")
             assert all(owned_by_rust(a) for a in b.values()), "a batch array was copied"
+            img = b["observation.images"]
+            assert type(img.base).__name__ == "ImageBuffer", "images not returned to the pool"
+            del b, img
+            n += 1
             equal += 1
+        assert n == len(e["batches"]), f"{c['name']} epoch {e['epoch']}: {n} batches"
     assert loader.state_dict() == {"epoch": len(epochs), "position": 0}, loader.state_dict()
 
     # set_epoch, a partial epoch, state_dict equal to Rust's, resume in a new loader.

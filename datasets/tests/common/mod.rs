@@ -2,7 +2,7 @@
 //! frame it belongs to, so a batch can be checked against the window it should hold.
 //!
 //! Files are written like `scaledp convert` writes them (see converter/src/lerobot/columns.rs):
-//! snappy, 64 KiB pages checked every 8 rows, image bytes uncompressed without dictionary or
+//! snappy, 2 KiB pages checked every row (a page per image), image bytes uncompressed without dictionary or
 //! statistics, one row group per episode — or, to test other writers, fixed-size row groups that
 //! cross episodes, `List<f32>` vectors, or no page index.
 #![allow(dead_code, clippy::unwrap_used)]
@@ -66,6 +66,9 @@ pub struct Fixture {
     pub list_vectors: bool,
     /// Write the page index (offset + column index); pyarrow does not by default.
     pub page_index: bool,
+    /// 64 KiB pages checked every 8 rows (several frames per page, as other writers do) instead
+    /// of the converter's 2 KiB checked every row (a page per frame).
+    pub big_pages: bool,
     /// State width.
     pub state_dim: usize,
     /// Action width.
@@ -83,6 +86,7 @@ impl Default for Fixture {
             noise: false,
             list_vectors: false,
             page_index: true,
+            big_pages: false,
             state_dim: 3,
             action_dim: 2,
         }
@@ -170,8 +174,8 @@ fn image_column(encoded: Vec<Vec<u8>>) -> ArrayRef {
 fn properties(fx: &Fixture, batch: &RecordBatch) -> WriterProperties {
     let mut b = WriterProperties::builder()
         .set_compression(Compression::SNAPPY)
-        .set_data_page_size_limit(64 << 10)
-        .set_write_batch_size(8)
+        .set_data_page_size_limit(if fx.big_pages { 64 << 10 } else { 2 << 10 })
+        .set_write_batch_size(if fx.big_pages { 8 } else { 1 })
         .set_max_row_group_size(fx.row_group_rows.unwrap_or(1 << 20));
     if !fx.page_index {
         b = b

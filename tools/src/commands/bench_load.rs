@@ -7,15 +7,16 @@
 //! (`tests/py/lerobot_baseline.py`); then a streaming epoch runs over a dataset several times
 //! larger, for its peak memory.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command as Process;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use scaledp_datasets::LoaderOptions;
 
 use super::bench_convert::{dir_bytes, measure, Measured};
 use super::bench_load_data::{ensure_dataset, ensure_larger, pure_decode, DataSpec};
+use super::bench_load_python::{run_lerobot, run_module};
 use crate::cli::{BenchLoadArgs, ExitStatus};
 
 const OBS_HORIZON: usize = 2;
@@ -26,7 +27,6 @@ const TARGET_DECODE_RATIO: f64 = 0.8;
 const TARGET_LEROBOT_RATIO: f64 = 5.0;
 /// Peak resident memory of the streaming run (bytes).
 const TARGET_STREAMING_RSS: u64 = 2_000_000_000;
-const LEROBOT_SCRIPT: &str = "tests/py/lerobot_baseline.py";
 
 /// What a worker (one loader epoch) reports on its last stdout line.
 #[derive(serde::Deserialize)]
@@ -38,16 +38,6 @@ struct EpochReport {
     seconds: f64,
     bytes_read: u64,
     shape: String,
-}
-
-/// What the LeRobot route did.
-struct LeRobotRun {
-    version: String,
-    samples: u64,
-    seconds: f64,
-    init_s: f64,
-    warmup_s: f64,
-    m: Measured,
 }
 
 /// One row of the table.
@@ -100,11 +90,15 @@ pub fn run(args: BenchLoadArgs) -> Result<ExitStatus> {
     tracing::info!("decoding the epoch's JPEGs on {threads} threads");
     let pure = pure_decode(&dataset, OBS_HORIZON, threads)?;
     let (decoded, decode_s) = (pure.images, pure.zune.seconds);
-    // 3. LeRobot on the same files.
-    let lerobot = if args.no_lerobot {
-        Err("--no-lerobot".to_string())
+    // 3. Our loader from Python, and LeRobot, on the same files.
+    let (module, lerobot) = if args.no_python {
+        let no = "--no-python".to_string();
+        (Err(no.clone()), Err(no))
     } else {
-        run_lerobot(&exe, &dataset, &cache, &args, threads)
+        (
+            run_module(&exe, &dataset, &cache, &args, threads),
+            run_lerobot(&exe, &dataset, &cache, &args, threads),
+        )
     };
     // 4. Streaming over a larger dataset.
     let streaming = if args.streaming_factor == 0 {
@@ -147,6 +141,16 @@ pub fn run(args: BenchLoadArgs) -> Result<ExitStatus> {
         bytes: None,
         peak_rss: None,
     });
+    if let Ok(r) = &module {
+        rows.push(Row {
+            route: "scaledp_data (Python)".into(),
+            samples: Some(r.samples),
+            images: Some(r.images),
+            seconds: r.seconds,
+            bytes: None,
+            peak_rss: r.m.peak_rss,
+        });
+    }
     let lerobot_rate = match &lerobot {
         Ok(r) => {
             rows.push(Row {
@@ -194,6 +198,14 @@ pub fn run(args: BenchLoadArgs) -> Result<ExitStatus> {
             zune_cpu / loader_cpu,
             chw_cpu / loader_cpu
         );
+    }
+    match &module {
+        Ok(r) => println!(
+            "from Python: scaledp_data.Loader, each batch dropped before the next, {:.0} images/s = {:.2}× pure decode",
+            r.images as f64 / r.seconds,
+            r.images as f64 / r.seconds / decode_images_s
+        ),
+        Err(why) => println!("scaledp_data from Python: not run — {why}"),
     }
     match (&lerobot, lerobot_rate) {
         (Ok(r), Some(rate)) => verdict(
@@ -316,6 +328,8 @@ fn worker(mode: &str, dataset: &Path, args: &BenchLoadArgs, threads: usize) -> R
         samples += b.len as u64;
         images += (b.len * b.obs_horizon * cams) as u64;
         batches += 1;
+        // What a Rust trainer does once the batch is on the device.
+        loader.recycle(b);
     }
     let seconds = t1.elapsed().as_secs_f64();
     println!(
@@ -361,72 +375,4 @@ fn run_worker(
         bail!("the {mode} loader epoch yielded no samples");
     }
     Ok((m, report))
-}
-
-/// Runs `tests/py/lerobot_baseline.py`; `Err` says why there is no baseline figure.
-fn run_lerobot(
-    exe: &Path,
-    dataset: &Path,
-    cache: &Path,
-    args: &BenchLoadArgs,
-    workers: usize,
-) -> Result<LeRobotRun, String> {
-    let cwd = std::env::current_dir().unwrap_or_default();
-    let workspace = exe
-        .ancestors()
-        .chain(cwd.ancestors())
-        .find(|d| d.join(LEROBOT_SCRIPT).is_file())
-        .ok_or_else(|| {
-            format!(
-                "{LEROBOT_SCRIPT} not found above {} or the current directory",
-                exe.display()
-            )
-        })?;
-    let python = match std::env::var_os("SCALEDP_BENCH_PYTHON") {
-        Some(p) => PathBuf::from(p),
-        None => {
-            let venv = workspace.join(".venv-bench/bin/python");
-            if !venv.exists() {
-                return Err(format!(
-                    "no {} (run scripts/setup-bench-python.sh, or set SCALEDP_BENCH_PYTHON to a Python with lerobot)",
-                    venv.display()
-                ));
-            }
-            venv
-        }
-    };
-    let hf_home = cache.join("hf-home");
-    let mut cmd = Process::new(&python);
-    cmd.arg(workspace.join(LEROBOT_SCRIPT))
-        .arg(dataset)
-        .args(["--batches", &args.lerobot_batches.to_string()])
-        .args(["--batch-size", &args.batch_size.to_string()])
-        .args(["--workers", &workers.to_string()])
-        .env("HF_HOME", &hf_home)
-        .env("HF_HUB_OFFLINE", "1");
-    let timeout = Duration::from_secs(1800);
-    tracing::info!("running the LeRobot baseline: {cmd:?}");
-    let m = measure(cmd, Some(timeout)).map_err(|e| format!("{}: {e:#}", python.display()))?;
-    if !m.status.success() {
-        let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
-        return Err(format!(
-            "{} exited with {}{why}",
-            python.display(),
-            m.status
-        ));
-    }
-    let last = m.stdout.last().ok_or("the baseline printed nothing")?;
-    let v: serde_json::Value =
-        serde_json::from_str(last).map_err(|e| format!("bad baseline output '{last}': {e}"))?;
-    match (v["samples"].as_u64(), v["seconds"].as_f64()) {
-        (Some(samples), Some(seconds)) if samples > 0 && seconds > 0.0 => Ok(LeRobotRun {
-            version: v["lerobot"].as_str().unwrap_or("?").to_string(),
-            samples,
-            seconds,
-            init_s: v["init_seconds"].as_f64().unwrap_or(f64::NAN),
-            warmup_s: v["warmup_seconds"].as_f64().unwrap_or(f64::NAN),
-            m,
-        }),
-        _ => Err(format!("bad baseline output '{last}'")),
-    }
 }

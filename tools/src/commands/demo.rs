@@ -180,6 +180,7 @@ fn load_one_epoch(dataset: &Path, batch_size: usize) -> Result<()> {
         }
         samples += b.len;
         batches += 1;
+        loader.recycle(b);
     }
     let epoch_s = epoch.elapsed().as_secs_f64();
     println!(
