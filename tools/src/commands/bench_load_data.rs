@@ -40,8 +40,12 @@ pub(super) struct DataSpec {
     pub jobs: usize,
 }
 
+/// The converter's file layout the cached datasets were written with: bump it when that
+/// layout changes (2: a Parquet page per encoded frame), so stale caches are not measured.
+const LAYOUT: u32 = 2;
+
 fn name(spec: &DataSpec) -> String {
-    format!("{RIG}-{}x{}s", spec.episodes, spec.seconds)
+    format!("{RIG}-{}x{}s-layout{LAYOUT}", spec.episodes, spec.seconds)
 }
 
 /// The marker written beside a dataset once it is complete.
