@@ -26,7 +26,7 @@ fn bench_load_smallest_configuration_prints_every_row() {
                 "2",
                 "--seconds",
                 "2",
-                "--no-lerobot",
+                "--no-python",
                 "-q",
             ])
             .arg("--dir")

@@ -256,7 +256,11 @@ fn check(py: &Path, manifest: &Path, env: &[(&str, &Path)]) -> Value {
     );
     // The report is the last line: torch's gloo backend prints to stdout from C++ before it.
     let stdout = String::from_utf8_lossy(&out.stdout);
-    let last = stdout.lines().rev().find(|l| l.starts_with('{')).unwrap_or("");
+    let last = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or("");
     serde_json::from_str(last).unwrap_or_else(|e| panic!("no JSON: {e}: {stdout}"))
 }
 

@@ -327,9 +327,9 @@ pub struct BenchLoadArgs {
     /// Batches LeRobot's DataLoader is timed over (after one warm-up batch).
     #[arg(long, default_value_t = 20)]
     pub lerobot_batches: usize,
-    /// Skip the LeRobot baseline.
-    #[arg(long)]
-    pub no_lerobot: bool,
+    /// Skip the Python routes (LeRobot's DataLoader and our module `scaledp_data`).
+    #[arg(long, alias = "no-lerobot")]
+    pub no_python: bool,
     /// Internal: run one loader epoch over DATASET in this process and print JSON
     /// (`random` or `streaming`); the benchmark measures it as a child process.
     #[arg(long, hide = true, value_name = "MODE", requires = "dataset")]

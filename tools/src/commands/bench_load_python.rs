@@ -1,0 +1,182 @@
+//! The Python routes of `scaledp bench load`, each a child process of the benchmark's Python
+//! (`.venv-bench`, from `scripts/setup-bench-python.sh`, or `SCALEDP_BENCH_PYTHON`):
+//! LeRobot's `LeRobotDataset` + torch `DataLoader` (`tests/py/lerobot_baseline.py`), and our
+//! own loader through its Python module `scaledp_data` (`tests/py/scaledp_data_epoch.py`, with
+//! the wheel `scripts/build-python.sh` leaves in `target/wheels` unpacked onto `PYTHONPATH`).
+//! Each returns `Err` with the reason when it cannot run, and the benchmark prints it.
+
+use std::path::{Path, PathBuf};
+use std::process::Command as Process;
+use std::time::Duration;
+
+use super::bench_convert::{measure, Measured};
+use crate::cli::BenchLoadArgs;
+
+const LEROBOT_SCRIPT: &str = "tests/py/lerobot_baseline.py";
+const MODULE_SCRIPT: &str = "tests/py/scaledp_data_epoch.py";
+const TIMEOUT: Duration = Duration::from_secs(1800);
+
+/// What the LeRobot route did.
+pub(super) struct LeRobotRun {
+    pub version: String,
+    pub samples: u64,
+    pub seconds: f64,
+    pub init_s: f64,
+    pub warmup_s: f64,
+    pub m: Measured,
+}
+
+/// What the `scaledp_data` route did.
+pub(super) struct ModuleRun {
+    pub samples: u64,
+    pub images: u64,
+    pub seconds: f64,
+    pub m: Measured,
+}
+
+/// The workspace (the directory holding the scripts) and the benchmark's Python.
+fn python(exe: &Path, script: &str) -> Result<(PathBuf, PathBuf), String> {
+    let cwd = std::env::current_dir().unwrap_or_default();
+    let workspace = exe
+        .ancestors()
+        .chain(cwd.ancestors())
+        .find(|d| d.join(script).is_file())
+        .ok_or_else(|| {
+            format!(
+                "{script} not found above {} or the current directory",
+                exe.display()
+            )
+        })?
+        .to_path_buf();
+    let python = match std::env::var_os("SCALEDP_BENCH_PYTHON") {
+        Some(p) => PathBuf::from(p),
+        None => {
+            let venv = workspace.join(".venv-bench/bin/python");
+            if !venv.exists() {
+                return Err(format!(
+                    "no {} (run scripts/setup-bench-python.sh, or set SCALEDP_BENCH_PYTHON)",
+                    venv.display()
+                ));
+            }
+            venv
+        }
+    };
+    Ok((workspace, python))
+}
+
+/// Runs `cmd`, and parses its last stdout line as JSON.
+fn run_json(python: &Path, cmd: Process) -> Result<(serde_json::Value, Measured), String> {
+    tracing::info!("running {cmd:?}");
+    let m = measure(cmd, Some(TIMEOUT)).map_err(|e| format!("{}: {e:#}", python.display()))?;
+    if !m.status.success() {
+        let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
+        return Err(format!(
+            "{} exited with {}{why}",
+            python.display(),
+            m.status
+        ));
+    }
+    let last = m.stdout.last().ok_or("it printed nothing")?;
+    let v = serde_json::from_str(last).map_err(|e| format!("bad output '{last}': {e}"))?;
+    Ok((v, m))
+}
+
+/// Runs `tests/py/lerobot_baseline.py` with `workers` DataLoader workers.
+pub(super) fn run_lerobot(
+    exe: &Path,
+    dataset: &Path,
+    cache: &Path,
+    args: &BenchLoadArgs,
+    workers: usize,
+) -> Result<LeRobotRun, String> {
+    let (workspace, python) = python(exe, LEROBOT_SCRIPT)?;
+    let mut cmd = Process::new(&python);
+    cmd.arg(workspace.join(LEROBOT_SCRIPT))
+        .arg(dataset)
+        .args(["--batches", &args.lerobot_batches.to_string()])
+        .args(["--batch-size", &args.batch_size.to_string()])
+        .args(["--workers", &workers.to_string()])
+        .env("HF_HOME", cache.join("hf-home"))
+        .env("HF_HUB_OFFLINE", "1");
+    let (v, m) = run_json(&python, cmd)?;
+    match (v["samples"].as_u64(), v["seconds"].as_f64()) {
+        (Some(samples), Some(seconds)) if samples > 0 && seconds > 0.0 => Ok(LeRobotRun {
+            version: v["lerobot"].as_str().unwrap_or("?").to_string(),
+            samples,
+            seconds,
+            init_s: v["init_seconds"].as_f64().unwrap_or(f64::NAN),
+            warmup_s: v["warmup_seconds"].as_f64().unwrap_or(f64::NAN),
+            m,
+        }),
+        _ => Err(format!("bad baseline output {v}")),
+    }
+}
+
+/// Runs one epoch of `scaledp_data.Loader` from the newest wheel in `target/wheels`.
+pub(super) fn run_module(
+    exe: &Path,
+    dataset: &Path,
+    cache: &Path,
+    args: &BenchLoadArgs,
+    threads: usize,
+) -> Result<ModuleRun, String> {
+    let (workspace, python) = python(exe, MODULE_SCRIPT)?;
+    let wheel = newest_wheel(&workspace.join("target/wheels")).ok_or_else(|| {
+        format!(
+            "no scaledp_data wheel in {} (run scripts/build-python.sh)",
+            workspace.join("target/wheels").display()
+        )
+    })?;
+    // A wheel is a zip of the package: unpacked, it imports from PYTHONPATH.
+    let site = cache.join("py-site");
+    let _ = std::fs::remove_dir_all(&site);
+    let unpack = Process::new(&python)
+        .args(["-m", "zipfile", "-e"])
+        .arg(&wheel)
+        .arg(&site)
+        .output()
+        .map_err(|e| format!("{}: {e}", python.display()))?;
+    if !unpack.status.success() {
+        return Err(format!(
+            "unpacking {}: {}",
+            wheel.display(),
+            String::from_utf8_lossy(&unpack.stderr).trim()
+        ));
+    }
+    let mut cmd = Process::new(&python);
+    cmd.arg(workspace.join(MODULE_SCRIPT))
+        .arg(dataset)
+        .args(["--batch-size", &args.batch_size.to_string()])
+        .args(["--threads", &threads.to_string()])
+        .env("PYTHONPATH", &site);
+    let (v, m) = run_json(&python, cmd)?;
+    match (
+        v["samples"].as_u64(),
+        v["images"].as_u64(),
+        v["seconds"].as_f64(),
+    ) {
+        (Some(samples), Some(images), Some(seconds)) if samples > 0 && seconds > 0.0 => {
+            Ok(ModuleRun {
+                samples,
+                images,
+                seconds,
+                m,
+            })
+        }
+        _ => Err(format!("bad output {v}")),
+    }
+}
+
+/// The most recently written `scaledp_data-*.whl` in `dir`.
+fn newest_wheel(dir: &Path) -> Option<PathBuf> {
+    std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(|e| e.ok())
+        .filter(|e| {
+            let n = e.file_name();
+            let n = n.to_string_lossy();
+            n.starts_with("scaledp_data-") && n.ends_with(".whl")
+        })
+        .max_by_key(|e| e.metadata().and_then(|m| m.modified()).ok())
+        .map(|e| e.path())
+}
