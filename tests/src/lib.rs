@@ -64,6 +64,24 @@ pub fn free_endpoint() -> String {
     format!("tcp/127.0.0.1:{port}")
 }
 
+/// Start of the first synthetic episode (ns); episode `seed` starts `seed` × 100 s later.
+pub const T0: u64 = 1_700_000_000_000_000_000;
+
+/// A recorder-style episode of `rig` at `path`, rendered by the simulator (task "stack the
+/// cubes").
+pub fn synth_episode(path: &Path, rig: &scaledp_schema::Rig, seed: u64, seconds: f64) {
+    scaledp::sim::synth::write_episode(
+        path,
+        rig,
+        seed,
+        seconds,
+        T0 + seed * 100_000_000_000,
+        "stack the cubes",
+        &mut |_, _, _, _| {},
+    )
+    .expect("a synthetic episode");
+}
+
 /// The Franka rig with the real topics, encodings and rates but 64×48 images.
 pub fn small_franka() -> scaledp_schema::Rig {
     let mut rig = scaledp_schema::Rig::builtin("franka_2zed").expect("shipped rig");

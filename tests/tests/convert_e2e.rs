@@ -11,10 +11,9 @@ use scaledp::sim::synth::write_episode;
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{
-    f32_rows, python, run_python, scaledp_bin, small_bimanual, small_franka, workspace,
+    f32_rows, python, run_python, scaledp_bin, small_bimanual, small_franka, synth_episode,
+    workspace, T0,
 };
-
-const T0: u64 = 1_700_000_000_000_000_000;
 
 fn rig_file(dir: &Path, rig: &Rig) -> PathBuf {
     let p = dir.join(format!("{}.toml", rig.name));
@@ -23,16 +22,7 @@ fn rig_file(dir: &Path, rig: &Rig) -> PathBuf {
 }
 
 fn synth(path: &Path, rig: &Rig, seed: u64, seconds: f64) {
-    write_episode(
-        path,
-        rig,
-        seed,
-        seconds,
-        T0 + seed * 100_000_000_000,
-        "stack the cubes",
-        &mut |_, _, _, _| {},
-    )
-    .unwrap();
+    synth_episode(path, rig, seed, seconds);
 }
 
 fn convert(args: &[&std::ffi::OsStr]) -> Output {

@@ -11,12 +11,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use scaledp::sim::synth::write_episode;
 use scaledp_datasets::{Batch, LoaderOptions, Norm, Split};
-use scaledp_tests::{f32_rows, python, scaledp_bin, small_franka, workspace};
+use scaledp_tests::{f32_rows, python, scaledp_bin, small_franka, synth_episode, workspace};
 use serde_json::{json, Value};
-
-const T0: u64 = 1_700_000_000_000_000_000;
 
 /// Four episodes of different lengths, two 64×48 cameras.
 fn dataset(dir: &Path) -> PathBuf {
@@ -25,16 +22,7 @@ fn dataset(dir: &Path) -> PathBuf {
     for (seed, seconds) in [(1u64, 2.0), (2, 2.6), (3, 1.7), (4, 3.1)] {
         let path = bags.join(format!("episode_{seed:06}.mcap"));
         std::fs::create_dir_all(&bags).unwrap();
-        write_episode(
-            &path,
-            &rig,
-            seed,
-            seconds,
-            T0 + seed * 100_000_000_000,
-            "stack the cubes",
-            &mut |_, _, _, _| {},
-        )
-        .unwrap();
+        synth_episode(&path, &rig, seed, seconds);
     }
     let rig_path = dir.join("rig.toml");
     std::fs::write(&rig_path, toml::to_string(&rig).unwrap()).unwrap();

@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use scaledp_schema::Rig;
 
+use super::bench_python::{python, run_json, PythonFor};
 use crate::cli::{BenchConvertArgs, ExitStatus};
 
 /// Frames/s of ours over the Python route that the issue asks for.
@@ -58,7 +59,8 @@ pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
         .with_context(|| format!("creating {}", recordings.display()))?;
 
     let t0 = Instant::now();
-    generate(&recordings, &rig, args.episodes, args.seconds, jobs)?;
+    let ids: Vec<usize> = (0..args.episodes).collect();
+    synthesize(&recordings, &rig, &ids, args.seconds, "bench convert", jobs)?;
     let input_bytes = dir_bytes(&recordings)?;
     let camera_frames: u64 = rig
         .cameras
@@ -201,27 +203,38 @@ pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
     Ok(ExitStatus::Success)
 }
 
-/// Writes `episode_000000.mcap`… with seeds 0..n, `jobs` at a time.
-fn generate(dir: &Path, rig: &Rig, n: usize, seconds: f64, jobs: usize) -> Result<()> {
+/// Writes episodes `ids` (seed = id) of `rig` as recorder-style MCAP files into `dir`, `jobs`
+/// at a time; returns their paths.
+pub(super) fn synthesize(
+    dir: &Path,
+    rig: &Rig,
+    ids: &[usize],
+    seconds: f64,
+    task: &str,
+    jobs: usize,
+) -> Result<Vec<PathBuf>> {
+    let paths: Vec<PathBuf> = ids
+        .iter()
+        .map(|i| dir.join(format!("episode_{i:06}.mcap")))
+        .collect();
     let next = AtomicUsize::new(0);
     let errors = Mutex::new(Vec::new());
     std::thread::scope(|s| {
-        for _ in 0..jobs.min(n) {
+        for _ in 0..jobs.min(ids.len()) {
             s.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                if i >= n {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                let (Some(&i), Some(path)) = (ids.get(k), paths.get(k)) else {
                     break;
-                }
-                let path = dir.join(format!("episode_{i:06}.mcap"));
+                };
                 // Distinct start times, a minute apart.
                 let start_ns = 1_700_000_000_000_000_000 + i as u64 * 60_000_000_000;
                 let r = crate::sim::synth::write_episode(
-                    &path,
+                    path,
                     rig,
                     i as u64,
                     seconds,
                     start_ns,
-                    "bench convert",
+                    task,
                     &mut |_, _, _, _| {},
                 );
                 if let Err(e) = r {
@@ -237,7 +250,7 @@ fn generate(dir: &Path, rig: &Rig, n: usize, seconds: f64, jobs: usize) -> Resul
     if !errors.is_empty() {
         bail!("generating the recordings failed: {}", errors.join("; "));
     }
-    Ok(())
+    Ok(paths)
 }
 
 struct Baseline {
@@ -253,46 +266,23 @@ fn run_baseline(
     out: &Path,
     recorded_s: f64,
 ) -> Result<Baseline, String> {
-    let workspace = exe
-        .ancestors()
-        .find(|d| d.join(BASELINE_SCRIPT).is_file())
-        .ok_or_else(|| format!("{BASELINE_SCRIPT} not found above {}", exe.display()))?;
-    let python = match std::env::var_os("SCALEDP_PYTHON") {
-        Some(p) => PathBuf::from(p),
-        None => {
-            let venv = workspace.join(".venv/bin/python");
-            if !venv.exists() {
-                return Err(format!(
-                    "no {} (set SCALEDP_PYTHON to a Python with rosbags, Pillow and pyarrow)",
-                    venv.display()
-                ));
-            }
-            venv
-        }
+    let test_python = PythonFor {
+        env: "SCALEDP_PYTHON",
+        venv: ".venv/bin/python",
+        hint: "run scripts/setup-python.sh, or set SCALEDP_PYTHON to a Python with rosbags, Pillow and pyarrow",
     };
-    let timeout = Duration::from_secs_f64(120.0 + 2.0 * recorded_s);
+    let (workspace, python) = python(exe, BASELINE_SCRIPT, &test_python)?;
     let mut cmd = Process::new(&python);
     cmd.arg(workspace.join(BASELINE_SCRIPT))
         .arg(recordings)
         .arg(out);
-    tracing::info!("running the Python baseline: {cmd:?} (timeout {timeout:?})");
-    let m = measure(cmd, Some(timeout)).map_err(|e| format!("{}: {e:#}", python.display()))?;
-    if !m.status.success() {
-        let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
-        return Err(format!(
-            "{} exited with {}{why}",
-            python.display(),
-            m.status
-        ));
-    }
-    let last = m.stdout.last().ok_or("the baseline printed nothing")?;
-    let v: serde_json::Value =
-        serde_json::from_str(last).map_err(|e| format!("bad baseline output '{last}': {e}"))?;
+    let timeout = Duration::from_secs_f64(120.0 + 2.0 * recorded_s);
+    let (v, m) = run_json(&python, cmd, timeout)?;
     match (v["frames"].as_u64(), v["seconds"].as_f64()) {
         (Some(frames), Some(seconds)) if frames > 0 && seconds > 0.0 => {
             Ok(Baseline { frames, seconds, m })
         }
-        _ => Err(format!("bad baseline output '{last}'")),
+        _ => Err(format!("bad baseline output {v}")),
     }
 }
 

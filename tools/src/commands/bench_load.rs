@@ -16,7 +16,7 @@ use scaledp_datasets::LoaderOptions;
 
 use super::bench_convert::{dir_bytes, measure, Measured};
 use super::bench_load_data::{ensure_dataset, ensure_larger, pure_decode, DataSpec};
-use super::bench_load_python::{run_lerobot, run_module};
+use super::bench_python::{run_lerobot, run_module};
 use crate::cli::{BenchLoadArgs, ExitStatus};
 
 const OBS_HORIZON: usize = 2;

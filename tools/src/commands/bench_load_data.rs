@@ -9,8 +9,6 @@
 
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -26,7 +24,10 @@ use zune_core::colorspace::ColorSpace;
 use zune_core::options::DecoderOptions;
 use zune_jpeg::JpegDecoder;
 
+use super::bench_convert::synthesize;
+
 const RIG: &str = "bimanual_ur5_3rs";
+const TASK: &str = "hand the cup from the left arm to the right";
 const WIDTH: u32 = 320;
 const HEIGHT: u32 = 240;
 
@@ -140,7 +141,7 @@ fn generate(cache: &Path, dir: &Path, spec: &DataSpec) -> Result<()> {
     let step = 2 * jobs;
     for first in (0..spec.episodes).step_by(step) {
         let ids: Vec<usize> = (first..(first + step).min(spec.episodes)).collect();
-        let inputs = synthesize(&tmp, &rig, &ids, spec.seconds, jobs)?;
+        let inputs = synthesize(&tmp, &rig, &ids, spec.seconds, TASK, jobs)?;
         let results = scaledp_converter::run(&inputs, dir, &opts(first == 0), &|_| {})
             .with_context(|| format!("converting into {}", dir.display()))?;
         for (path, outcome) in results {
@@ -156,54 +157,6 @@ fn generate(cache: &Path, dir: &Path, spec: &DataSpec) -> Result<()> {
     progress.finish_and_clear();
     std::fs::remove_dir_all(&tmp).ok();
     Ok(())
-}
-
-/// Writes episodes `ids` (seed = id) into `dir`, `jobs` at a time; returns their paths.
-fn synthesize(
-    dir: &Path,
-    rig: &Rig,
-    ids: &[usize],
-    seconds: f64,
-    jobs: usize,
-) -> Result<Vec<PathBuf>> {
-    let paths: Vec<PathBuf> = ids
-        .iter()
-        .map(|i| dir.join(format!("episode_{i:06}.mcap")))
-        .collect();
-    let next = AtomicUsize::new(0);
-    let errors = Mutex::new(Vec::new());
-    std::thread::scope(|s| {
-        for _ in 0..jobs.min(ids.len()) {
-            s.spawn(|| loop {
-                let k = next.fetch_add(1, Ordering::Relaxed);
-                let (Some(&i), Some(path)) = (ids.get(k), paths.get(k)) else {
-                    break;
-                };
-                // Distinct start times, a minute apart.
-                let start_ns = 1_700_000_000_000_000_000 + i as u64 * 60_000_000_000;
-                let r = crate::sim::synth::write_episode(
-                    path,
-                    rig,
-                    i as u64,
-                    seconds,
-                    start_ns,
-                    "hand the cup from the left arm to the right",
-                    &mut |_, _, _, _| {},
-                );
-                if let Err(e) = r {
-                    errors
-                        .lock()
-                        .unwrap_or_else(|p| p.into_inner())
-                        .push(format!("{}: {e:#}", path.display()));
-                }
-            });
-        }
-    });
-    let errors = errors.into_inner().unwrap_or_else(|p| p.into_inner());
-    if !errors.is_empty() {
-        bail!("generating the recordings failed: {}", errors.join("; "));
-    }
-    Ok(paths)
 }
 
 /// `factor` copies of `dataset` merged into one (made if absent or incomplete), and how.

@@ -4,7 +4,7 @@ mod bench;
 mod bench_convert;
 mod bench_load;
 mod bench_load_data;
-mod bench_load_python;
+mod bench_python;
 mod convert;
 mod demo;
 mod record;

@@ -1,9 +1,10 @@
-//! The Python routes of `scaledp bench load`, each a child process of the benchmark's Python
-//! (`.venv-bench`, from `scripts/setup-bench-python.sh`, or `SCALEDP_BENCH_PYTHON`):
-//! LeRobot's `LeRobotDataset` + torch `DataLoader` (`tests/py/lerobot_baseline.py`), and our
-//! own loader through its Python module `scaledp_data` (`tests/py/scaledp_data_epoch.py`, with
-//! the wheel `scripts/build-python.sh` leaves in `target/wheels` unpacked onto `PYTHONPATH`).
-//! Each returns `Err` with the reason when it cannot run, and the benchmark prints it.
+//! The Python routes of the benchmarks, each a child process: for `bench load`, LeRobot's
+//! `LeRobotDataset` + torch `DataLoader` (`tests/py/lerobot_baseline.py`) and our own loader
+//! through its Python module `scaledp_data` (`tests/py/scaledp_data_epoch.py`, with the wheel
+//! `scripts/build-python.sh` leaves in `target/wheels` unpacked onto `PYTHONPATH`), both run by
+//! the benchmark Python (`.venv-bench`, from `scripts/setup-bench-python.sh`, or
+//! `SCALEDP_BENCH_PYTHON`); for `bench convert`, the helpers that find a Python and run a
+//! script. A route that cannot run returns `Err` with the reason, which the benchmark prints.
 
 use std::path::{Path, PathBuf};
 use std::process::Command as Process;
@@ -34,8 +35,26 @@ pub(super) struct ModuleRun {
     pub m: Measured,
 }
 
-/// The workspace (the directory holding the scripts) and the benchmark's Python.
-fn python(exe: &Path, script: &str) -> Result<(PathBuf, PathBuf), String> {
+/// Where a route finds its Python: `env` if set, else `venv` (relative to the workspace),
+/// whose absence `hint` explains.
+pub(super) struct PythonFor {
+    pub env: &'static str,
+    pub venv: &'static str,
+    pub hint: &'static str,
+}
+
+const BENCH_PYTHON: PythonFor = PythonFor {
+    env: "SCALEDP_BENCH_PYTHON",
+    venv: ".venv-bench/bin/python",
+    hint: "run scripts/setup-bench-python.sh, or set SCALEDP_BENCH_PYTHON",
+};
+
+/// The workspace (the directory holding `script`) and the Python to run it with.
+pub(super) fn python(
+    exe: &Path,
+    script: &str,
+    which: &PythonFor,
+) -> Result<(PathBuf, PathBuf), String> {
     let cwd = std::env::current_dir().unwrap_or_default();
     let workspace = exe
         .ancestors()
@@ -48,15 +67,12 @@ fn python(exe: &Path, script: &str) -> Result<(PathBuf, PathBuf), String> {
             )
         })?
         .to_path_buf();
-    let python = match std::env::var_os("SCALEDP_BENCH_PYTHON") {
+    let python = match std::env::var_os(which.env) {
         Some(p) => PathBuf::from(p),
         None => {
-            let venv = workspace.join(".venv-bench/bin/python");
+            let venv = workspace.join(which.venv);
             if !venv.exists() {
-                return Err(format!(
-                    "no {} (run scripts/setup-bench-python.sh, or set SCALEDP_BENCH_PYTHON)",
-                    venv.display()
-                ));
+                return Err(format!("no {} ({})", venv.display(), which.hint));
             }
             venv
         }
@@ -64,10 +80,15 @@ fn python(exe: &Path, script: &str) -> Result<(PathBuf, PathBuf), String> {
     Ok((workspace, python))
 }
 
-/// Runs `cmd`, and parses its last stdout line as JSON.
-fn run_json(python: &Path, cmd: Process) -> Result<(serde_json::Value, Measured), String> {
-    tracing::info!("running {cmd:?}");
-    let m = measure(cmd, Some(TIMEOUT)).map_err(|e| format!("{}: {e:#}", python.display()))?;
+/// Runs `cmd` (a script of `python`) to the end or `timeout`, and parses its last stdout line
+/// as JSON.
+pub(super) fn run_json(
+    python: &Path,
+    cmd: Process,
+    timeout: Duration,
+) -> Result<(serde_json::Value, Measured), String> {
+    tracing::info!("running {cmd:?} (timeout {timeout:?})");
+    let m = measure(cmd, Some(timeout)).map_err(|e| format!("{}: {e:#}", python.display()))?;
     if !m.status.success() {
         let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
         return Err(format!(
@@ -89,7 +110,7 @@ pub(super) fn run_lerobot(
     args: &BenchLoadArgs,
     workers: usize,
 ) -> Result<LeRobotRun, String> {
-    let (workspace, python) = python(exe, LEROBOT_SCRIPT)?;
+    let (workspace, python) = python(exe, LEROBOT_SCRIPT, &BENCH_PYTHON)?;
     let mut cmd = Process::new(&python);
     cmd.arg(workspace.join(LEROBOT_SCRIPT))
         .arg(dataset)
@@ -98,7 +119,7 @@ pub(super) fn run_lerobot(
         .args(["--workers", &workers.to_string()])
         .env("HF_HOME", cache.join("hf-home"))
         .env("HF_HUB_OFFLINE", "1");
-    let (v, m) = run_json(&python, cmd)?;
+    let (v, m) = run_json(&python, cmd, TIMEOUT)?;
     match (v["samples"].as_u64(), v["seconds"].as_f64()) {
         (Some(samples), Some(seconds)) if samples > 0 && seconds > 0.0 => Ok(LeRobotRun {
             version: v["lerobot"].as_str().unwrap_or("?").to_string(),
@@ -120,7 +141,7 @@ pub(super) fn run_module(
     args: &BenchLoadArgs,
     threads: usize,
 ) -> Result<ModuleRun, String> {
-    let (workspace, python) = python(exe, MODULE_SCRIPT)?;
+    let (workspace, python) = python(exe, MODULE_SCRIPT, &BENCH_PYTHON)?;
     let wheel = newest_wheel(&workspace.join("target/wheels")).ok_or_else(|| {
         format!(
             "no scaledp_data wheel in {} (run scripts/build-python.sh)",
@@ -149,7 +170,7 @@ pub(super) fn run_module(
         .args(["--batch-size", &args.batch_size.to_string()])
         .args(["--threads", &threads.to_string()])
         .env("PYTHONPATH", &site);
-    let (v, m) = run_json(&python, cmd)?;
+    let (v, m) = run_json(&python, cmd, TIMEOUT)?;
     match (
         v["samples"].as_u64(),
         v["images"].as_u64(),
