@@ -179,12 +179,18 @@ impl RobotModel {
 /// Roll, pitch, yaw (rad) of a rotation with ROS's convention R = Rz(yaw)·Ry(pitch)·Rx(roll).
 pub fn rpy_from_rotation(r: DMat3) -> [f64; 3] {
     // Column-major: r.col(c)[row].
-    let r20 = r.col(0)[2];
+    let (r00, r10, r20) = (r.col(0)[0], r.col(0)[1], r.col(0)[2]);
+    let cos_pitch = r00.hypot(r10);
     // atan2 keeps full precision near ±π/2, where asin(−r20) loses digits.
-    let pitch = (-r20).atan2(r.col(0)[0].hypot(r.col(0)[1]));
-    if r20.abs() < 1.0 - 1e-12 {
-        let roll = r.col(1)[2].atan2(r.col(2)[2]);
-        let yaw = r.col(0)[1].atan2(r.col(0)[0]);
+    let pitch = (-r20).atan2(cos_pitch);
+    if cos_pitch > 1e-12 {
+        let yaw = r10.atan2(r00);
+        // Roll from Rz(−yaw)·R = Ry(pitch)·Rx(roll), whose middle row is (0, cos roll,
+        // −sin roll). Unlike atan2(r21, r22) this roll fits the yaw actually returned, so the
+        // angles rebuild R to rounding error even where cos(pitch) is tiny and yaw is poorly
+        // conditioned (tests/tests/fk_reference.rs checks this next to gimbal lock).
+        let (sy, cy) = yaw.sin_cos();
+        let roll = (sy * r.col(2)[0] - cy * r.col(2)[1]).atan2(cy * r.col(1)[1] - sy * r.col(1)[0]);
         [roll, pitch, yaw]
     } else {
         // Gimbal lock: only roll − yaw (or roll + yaw) is defined; put it all in yaw.
