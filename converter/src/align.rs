@@ -1,4 +1,5 @@
-//! Time alignment on capture stamps: a uniform grid of ticks at the target rate; at each tick
+//! Time alignment on capture stamps: a uniform grid of ticks at the target rate, its phase
+//! chosen so that synchronised cameras agree on their frames (see [`grid_phase`]); at each tick
 //! every camera gives its latest frame at or before the tick and every joint stream is linearly
 //! interpolated. A camera frame older than `stale_periods` frame periods, or a joint stream with
 //! no samples around the tick, makes the tick invalid; invalid ticks at either end are trimmed,
@@ -137,6 +138,7 @@ pub fn align(
         return Err("the streams do not overlap in time".into());
     }
     let step_ns = 1e9 / fps;
+    let start = start + grid_phase(cameras, start, end, step_ns);
     let n = ((end - start) as f64 / step_ns).floor() as usize + 1;
     // Every stream has messages all through [start, end], and a tick is only valid with a recent
     // sample of each, so a grid far denser than the busiest stream cannot be an episode: it is a
@@ -222,6 +224,57 @@ pub fn align(
     })
 }
 
+/// Candidate grid phases tried by [`grid_phase`], over one frame period of the fastest camera.
+const PHASES: usize = 32;
+/// Ticks scored per candidate phase.
+const PHASE_SAMPLES: usize = 256;
+
+/// Offset (ns) of the first tick after `start` that keeps the cameras' chosen frames closest
+/// together, then freshest. A grid started on a frame stamp puts every tick on the frame
+/// instants of synchronised cameras, where capture jitter makes each camera pick the current or
+/// the previous frame by chance: views a whole frame period apart at one tick. Ticks a little
+/// after the frame instants pick the same capture on every camera.
+fn grid_phase(cameras: &[Stream], start: u64, end: u64, step_ns: f64) -> u64 {
+    let period_ns = cameras
+        .iter()
+        .map(|c| c.period_s * 1e9)
+        .fold(step_ns, f64::min);
+    if cameras.is_empty() || period_ns.is_nan() || period_ns < 1.0 {
+        return 0;
+    }
+    let span = (end - start) as f64;
+    let score = |phase: f64| {
+        let n = ((span - phase) / step_ns).floor();
+        if n < 0.0 {
+            return (f64::INFINITY, f64::INFINITY);
+        }
+        let samples = PHASE_SAMPLES.min(n as usize + 1);
+        let (mut skew, mut age) = (0.0, 0.0);
+        for j in 0..samples {
+            let k = (j as f64 * n / samples.max(2).saturating_sub(1) as f64).round();
+            let t = start + (phase + k * step_ns).round() as u64;
+            let (mut lo, mut hi) = (u64::MAX, 0);
+            for c in cameras {
+                let s = c.stamps_ns[c.latest_at(t).unwrap_or(0)];
+                lo = lo.min(s);
+                hi = hi.max(s);
+                age += t.saturating_sub(s) as f64;
+            }
+            skew += (hi - lo) as f64;
+        }
+        (skew, age)
+    };
+    let mut best = (0.0, score(0.0));
+    for i in 1..PHASES {
+        let phase = i as f64 * period_ns / PHASES as f64;
+        let s = score(phase);
+        if s.0 < best.1 .0 || (s.0 == best.1 .0 && s.1 < best.1 .1) {
+            best = (phase, s);
+        }
+    }
+    best.0.round() as u64
+}
+
 fn stream_report(s: &Stream) -> StreamReport {
     let mut r = StreamReport {
         topic: s.topic.clone(),
@@ -270,6 +323,39 @@ mod tests {
             assert!((interp - *t as f64).abs() < 1.0);
         }
         assert_eq!(a.report.invalid, 0);
+    }
+
+    #[test]
+    fn synchronised_cameras_with_jitter_pick_the_same_capture() {
+        // Two 30 fps cameras triggered together, each stamp off by up to ±0.4 ms; both first
+        // stamps on the trigger, so a grid started there lies on the frame instants.
+        let jittered = |sign: i64| -> Vec<u64> {
+            grid(0, 100.0 / 3.0, 90)
+                .into_iter()
+                .enumerate()
+                .map(|(k, s)| {
+                    let j = sign * [0i64, 400_000, -300_000, 100_000, -400_000][k % 5];
+                    (s as i64 + 1_000_000 + j) as u64
+                })
+                .collect()
+        };
+        let cams = [
+            Stream::new("/a", jittered(1), Some(30.0)),
+            Stream::new("/b", jittered(-1), Some(30.0)),
+        ];
+        let joints = Stream::new("/joints", grid(0, 1.0, 3001), Some(1000.0));
+        let a = align(&cams, std::slice::from_ref(&joints), 10.0, 1.5, 0.0).unwrap();
+        assert!(a.report.ticks >= 28, "{}", a.report.ticks);
+        assert!(
+            a.report.max_camera_skew_s < 0.001,
+            "{} s",
+            a.report.max_camera_skew_s
+        );
+        // Every tick takes the same capture (index) from both cameras, at most a few ms old.
+        for (t, f) in a.ticks_ns.iter().zip(&a.frames) {
+            assert_eq!(f[0], f[1]);
+            assert!(t - cams[0].stamps_ns[f[0]] < 5_000_000);
+        }
     }
 
     #[test]
