@@ -501,10 +501,22 @@ pub fn convert(
             )));
         }
         let stream = Stream::new(topic, stamps, None);
-        for (t, tick) in aligned.ticks_ns[..frames].iter().enumerate() {
-            let i = stream.latest_at(*tick).unwrap_or(0);
+        let chosen: Vec<usize> = aligned.ticks_ns[..frames]
+            .iter()
+            .map(|tick| stream.latest_at(*tick).unwrap_or(0))
+            .collect();
+        // Put the command's angles on the state's branch (within π of it at the first tick),
+        // so action − state never carries a spurious full turn.
+        let mut turn = [0.0; 6];
+        if let Some(&first) = chosen.first() {
+            for (d, shift) in turn.iter_mut().enumerate().skip(3) {
+                let gap = f64::from(state_ticks[0][a * 7 + d]) - poses[first][d];
+                *shift = std::f64::consts::TAU * (gap / std::f64::consts::TAU).round();
+            }
+        }
+        for (t, &i) in chosen.iter().enumerate() {
             for (d, v) in poses[i].iter().enumerate() {
-                action[t * dim + a * 7 + d] = *v as f32;
+                action[t * dim + a * 7 + d] = (*v + turn[d]) as f32;
             }
         }
     }

@@ -130,3 +130,71 @@ pub fn f32_rows(dataset: &Path, column: &str) -> Vec<Vec<f32>> {
     }
     rows
 }
+
+/// Runs `scaledp convert ARGS -q` and returns its output.
+pub fn convert_cli(args: &[&std::ffi::OsStr]) -> std::process::Output {
+    Command::new(scaledp_bin())
+        .arg("convert")
+        .args(args)
+        .arg("-q")
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap_or_else(|e| panic!("running scaledp convert: {e}"))
+}
+
+/// Checks a dataset with `check_lerobot.py` against LeRobot's own example; panics on any error.
+/// Returns the script's report.
+pub fn check_dataset(ds: &Path) -> serde_json::Value {
+    let v = run_python(
+        "check_lerobot.py",
+        &[ds, &workspace().join("tests/fixtures/lerobot_v3_example")],
+    );
+    assert_eq!(v["errors"], serde_json::json!([]), "{}", ds.display());
+    v
+}
+
+/// Writes `rig` as `<dir>/<name>.toml` and returns the path.
+pub fn write_rig_file(dir: &Path, rig: &scaledp_schema::Rig) -> PathBuf {
+    let p = dir.join(format!("{}.toml", rig.name));
+    std::fs::write(&p, toml::to_string(rig).expect("rig TOML")).expect("a rig file");
+    p
+}
+
+/// A JSON file, parsed.
+pub fn read_json(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_slice(&bytes).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Message `k` of `topic` as a publisher of [`small_franka`] could send it: a 64×48 bgra8
+/// image filled with `k`, or a one-joint state at `k`; stamped `k` ms after [`T0`], so every
+/// message of a topic is distinct.
+pub fn numbered_message(topic: &scaledp_schema::rig::TopicSpec, k: u64) -> Vec<u8> {
+    use scaledp_schema::msg::{Header, Image, JointState, Time};
+    use scaledp_schema::RosMessage;
+    let header = Header {
+        stamp: Time::from_ns(T0 + k * 1_000_000),
+        frame_id: String::new(),
+    };
+    if topic.is_image {
+        Image {
+            header,
+            height: 48,
+            width: 64,
+            encoding: "bgra8".into(),
+            is_bigendian: 0,
+            step: 64 * 4,
+            data: vec![k as u8; 64 * 48 * 4],
+        }
+        .to_cdr()
+    } else {
+        JointState {
+            header,
+            name: vec!["j".into()],
+            position: vec![k as f64],
+            velocity: vec![0.0],
+            effort: vec![],
+        }
+        .to_cdr()
+    }
+}

@@ -3,46 +3,17 @@
 
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use scaledp::sim::synth::write_episode;
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{
-    f32_rows, python, run_python, scaledp_bin, small_bimanual, small_franka, synth_episode,
-    workspace, T0,
+    check_dataset, convert_cli, f32_rows, python, scaledp_bin, small_bimanual, small_franka,
+    synth_episode, workspace, write_rig_file, T0,
 };
-
-fn rig_file(dir: &Path, rig: &Rig) -> PathBuf {
-    let p = dir.join(format!("{}.toml", rig.name));
-    std::fs::write(&p, toml::to_string(rig).unwrap()).unwrap();
-    p
-}
-
-fn synth(path: &Path, rig: &Rig, seed: u64, seconds: f64) {
-    synth_episode(path, rig, seed, seconds);
-}
-
-fn convert(args: &[&std::ffi::OsStr]) -> Output {
-    Command::new(scaledp_bin())
-        .arg("convert")
-        .args(args)
-        .arg("-q")
-        .stdin(Stdio::null())
-        .output()
-        .unwrap()
-}
-
-fn check(ds: &Path) -> serde_json::Value {
-    let v = run_python(
-        "check_lerobot.py",
-        &[ds, &workspace().join("tests/fixtures/lerobot_v3_example")],
-    );
-    assert_eq!(v["errors"], serde_json::json!([]), "{}", ds.display());
-    v
-}
 
 #[test]
 fn every_input_format_converts_into_one_lerobot_dataset() {
@@ -59,10 +30,10 @@ fn every_input_format_converts_into_one_lerobot_dataset() {
         String::from_utf8_lossy(&out.stderr)
     );
     let rig = small_franka();
-    synth(&bags.join("episode_000000.mcap"), &rig, 1, 3.0);
+    synth_episode(&bags.join("episode_000000.mcap"), &rig, 1, 3.0);
     let ds = dir.path().join("ds");
-    let rig_path = rig_file(dir.path(), &rig);
-    let out = convert(&[
+    let rig_path = write_rig_file(dir.path(), &rig);
+    let out = convert_cli(&[
         bags.as_os_str(),
         "--rig".as_ref(),
         rig_path.as_os_str(),
@@ -78,7 +49,7 @@ fn every_input_format_converts_into_one_lerobot_dataset() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.contains("6 converted"), "{stdout}");
-    let v = check(&ds);
+    let v = check_dataset(&ds);
     assert_eq!(v["episodes"], 6);
     // The recorder episode (sorted first) keeps its own task; bags store none and get --task.
     let tasks: Vec<&str> = v["tasks"]
@@ -100,7 +71,7 @@ fn every_input_format_converts_into_one_lerobot_dataset() {
     );
 
     // A second run skips everything already converted (by content hash).
-    let again = convert(&[
+    let again = convert_cli(&[
         bags.as_os_str(),
         "--rig".as_ref(),
         rig_path.as_os_str(),
@@ -159,7 +130,7 @@ fn bad_inputs_get_one_clear_line_each_and_the_rest_convert() {
     let inp = dir.path().join("in");
     std::fs::create_dir_all(&inp).unwrap();
     let rig = small_franka();
-    synth(&inp.join("a_good.mcap"), &rig, 1, 2.5);
+    synth_episode(&inp.join("a_good.mcap"), &rig, 1, 2.5);
     let good = std::fs::read(inp.join("a_good.mcap")).unwrap();
     std::fs::write(inp.join("truncated.mcap"), &good[..good.len() / 2]).unwrap();
     {
@@ -184,15 +155,15 @@ fn bad_inputs_get_one_clear_line_each_and_the_rest_convert() {
     }
     let mut no_wrist = rig.clone();
     no_wrist.cameras.pop();
-    synth(&inp.join("missing_camera.mcap"), &no_wrist, 20, 2.5);
+    synth_episode(&inp.join("missing_camera.mcap"), &no_wrist, 20, 2.5);
     let mut renamed = rig.clone();
     renamed.arms[0].joint_names[6] = "fr3_joint7_renamed".into();
-    synth(&inp.join("missing_joint.mcap"), &renamed, 21, 2.5);
-    synth(&inp.join("z_good.mcap"), &rig, 2, 2.5);
+    synth_episode(&inp.join("missing_joint.mcap"), &renamed, 21, 2.5);
+    synth_episode(&inp.join("z_good.mcap"), &rig, 2, 2.5);
 
     let ds = dir.path().join("ds");
-    let rig_path = rig_file(dir.path(), &rig);
-    let out = convert(&[
+    let rig_path = write_rig_file(dir.path(), &rig);
+    let out = convert_cli(&[
         inp.as_os_str(),
         "--rig".as_ref(),
         rig_path.as_os_str(),
@@ -248,7 +219,7 @@ fn bad_inputs_get_one_clear_line_each_and_the_rest_convert() {
             lines[0]
         );
     }
-    let v = check(&ds);
+    let v = check_dataset(&ds);
     assert_eq!(v["episodes"], 2);
 }
 
@@ -259,7 +230,7 @@ fn a_killed_conversion_leaves_a_valid_dataset_and_the_rerun_finishes_it() {
     std::fs::create_dir_all(&inp).unwrap();
     let rig = small_franka();
     for i in 0..8 {
-        synth(&inp.join(format!("episode_{i:06}.mcap")), &rig, i, 4.0);
+        synth_episode(&inp.join(format!("episode_{i:06}.mcap")), &rig, i, 4.0);
     }
     let ds = dir.path().join("ds");
     let mut child = Command::new(scaledp_bin())
@@ -288,7 +259,7 @@ fn a_killed_conversion_leaves_a_valid_dataset_and_the_rerun_finishes_it() {
     // Opening repairs whatever the kill interrupted; then the dataset is consistent.
     let rerun_dir = dir.path().join("empty");
     std::fs::create_dir_all(&rerun_dir).unwrap();
-    let out = convert(&[
+    let out = convert_cli(&[
         rerun_dir.as_os_str(),
         inp.as_os_str(),
         "--out".as_ref(),
@@ -300,7 +271,7 @@ fn a_killed_conversion_leaves_a_valid_dataset_and_the_rerun_finishes_it() {
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "{stdout}");
-    let v = check(&ds);
+    let v = check_dataset(&ds);
     assert_eq!(v["episodes"], 8, "{stdout}");
     assert!(
         !stdout.contains(" 0 skipped"),
@@ -310,18 +281,20 @@ fn a_killed_conversion_leaves_a_valid_dataset_and_the_rerun_finishes_it() {
 
 #[test]
 fn a_killed_dataset_is_valid_before_any_repair() {
-    // Kill at several moments and check the dataset as it lies on disk, unrepaired, as LeRobot
-    // would read it. Only a kill inside a commit's burst of renames (a few syscalls) could leave
-    // rows no metadata lists; the next scaledp run repairs that (previous test).
+    // Kill after 1, 2 and 3 committed episodes, a little later each time (so the kill lands
+    // while the next episode is being converted), and check the dataset as it lies on disk,
+    // unrepaired, as LeRobot would read it. Only a kill inside a commit's burst of renames (a few
+    // syscalls, which the settle time steps past) could leave rows no metadata lists; the next
+    // scaledp run repairs that (previous test).
     let dir = tempfile::tempdir().unwrap();
     let inp = dir.path().join("in");
     std::fs::create_dir_all(&inp).unwrap();
     let rig = small_franka();
-    for i in 0..4 {
-        synth(&inp.join(format!("episode_{i:06}.mcap")), &rig, i, 3.0);
+    for i in 0..5 {
+        synth_episode(&inp.join(format!("episode_{i:06}.mcap")), &rig, i, 3.0);
     }
-    for delay_ms in [300u64, 700, 1100] {
-        let ds = dir.path().join(format!("ds{delay_ms}"));
+    for (target, settle_ms) in [(1usize, 20u64), (2, 60), (3, 140)] {
+        let ds = dir.path().join(format!("ds{target}"));
         let mut child = Command::new(scaledp_bin())
             .args(["convert", "-q", "--jobs", "1"])
             .arg(&inp)
@@ -331,12 +304,26 @@ fn a_killed_dataset_is_valid_before_any_repair() {
             .stderr(Stdio::null())
             .spawn()
             .unwrap();
-        std::thread::sleep(Duration::from_millis(delay_ms));
+        let record = ds.join("meta/scaledp.json");
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let committed = || {
+            std::fs::read(&record)
+                .ok()
+                .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+                .map_or(0, |v| v["episodes"].as_array().map_or(0, Vec::len))
+        };
+        while committed() < target {
+            assert!(Instant::now() < deadline, "no episode {target} within 60 s");
+            assert!(child.try_wait().unwrap().is_none(), "convert exited early");
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        std::thread::sleep(Duration::from_millis(settle_ms));
         child.kill().unwrap();
         child.wait().unwrap();
-        if ds.join("meta/info.json").exists() {
-            check(&ds);
-        }
+        let on_disk = committed();
+        assert!(on_disk >= target);
+        let v = check_dataset(&ds);
+        assert_eq!(v["episodes"], on_disk, "killed after {target}");
     }
 }
 
@@ -347,7 +334,7 @@ fn shards_merged_equal_one_run() {
     std::fs::create_dir_all(&inp).unwrap();
     let rig = small_franka();
     for i in 0..5 {
-        synth(
+        synth_episode(
             &inp.join(format!("episode_{i:06}.mcap")),
             &rig,
             i,
@@ -359,7 +346,7 @@ fn shards_merged_equal_one_run() {
         let mut args: Vec<&std::ffi::OsStr> =
             vec![inp.as_os_str(), "--out".as_ref(), ds.as_os_str()];
         args.extend(extra.iter().map(std::ffi::OsStr::new));
-        let out = convert(&args);
+        let out = convert_cli(&args);
         assert!(
             out.status.success(),
             "{}",
@@ -384,7 +371,7 @@ fn shards_merged_equal_one_run() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    check(&merged);
+    check_dataset(&merged);
     for f in [
         "meta/info.json",
         "meta/stats.json",
@@ -405,15 +392,15 @@ fn bimanual_state_is_14d_in_rig_order_and_matches_forward_kinematics() {
     let dir = tempfile::tempdir().unwrap();
     let rig = small_bimanual();
     let ep = dir.path().join("episode_000000.mcap");
-    synth(&ep, &rig, 4, 3.0);
+    synth_episode(&ep, &rig, 4, 3.0);
     let ds = dir.path().join("ds");
-    let out = convert(&[ep.as_os_str(), "--out".as_ref(), ds.as_os_str()]);
+    let out = convert_cli(&[ep.as_os_str(), "--out".as_ref(), ds.as_os_str()]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
-    let v = check(&ds);
+    let v = check_dataset(&ds);
     let names: Vec<String> = ["left", "right"]
         .iter()
         .flat_map(|a| {
@@ -460,9 +447,9 @@ fn a_long_recording_splits_on_time_gaps() {
     let dir = tempfile::tempdir().unwrap();
     let rig = small_franka();
     let (a, b) = (dir.path().join("a.mcap"), dir.path().join("b.mcap"));
-    synth(&a, &rig, 0, 2.5);
-    synth(&b, &rig, 1, 3.0); // starts 100 s after the first
-                             // One file holding both, as a long session bag would.
+    synth_episode(&a, &rig, 0, 2.5);
+    synth_episode(&b, &rig, 1, 3.0); // starts 100 s after the first
+                                     // One file holding both, as a long session bag would.
     let long = dir.path().join("session.mcap");
     {
         let mut w = mcap::WriteOptions::new()
@@ -480,7 +467,7 @@ fn a_long_recording_splits_on_time_gaps() {
         w.finish().unwrap();
     }
     let ds = dir.path().join("ds");
-    let rig_path = rig_file(dir.path(), &rig);
+    let rig_path = write_rig_file(dir.path(), &rig);
     let args = [
         long.as_os_str(),
         "--rig".as_ref(),
@@ -492,7 +479,7 @@ fn a_long_recording_splits_on_time_gaps() {
         "--out".as_ref(),
         ds.as_os_str(),
     ];
-    let out = convert(&args);
+    let out = convert_cli(&args);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success() && stdout.contains("2 converted"),
@@ -502,10 +489,10 @@ fn a_long_recording_splits_on_time_gaps() {
         stdout.contains("session.mcap#0") && stdout.contains("session.mcap#1"),
         "{stdout}"
     );
-    let v = check(&ds);
+    let v = check_dataset(&ds);
     assert_eq!(v["episodes"], 2);
     // Both parts are in: a re-run skips the input.
-    let again = convert(&args);
+    let again = convert_cli(&args);
     assert!(String::from_utf8_lossy(&again.stdout).contains("1 skipped"));
 }
 
@@ -514,13 +501,13 @@ fn a_command_topic_gives_the_action_instead_of_the_next_tick() {
     let dir = tempfile::tempdir().unwrap();
     let rig = small_franka();
     let ep = dir.path().join("episode_000000.mcap");
-    synth(&ep, &rig, 5, 3.0);
+    synth_episode(&ep, &rig, 5, 3.0);
     let arm = &rig.arms[0];
     let run = |name: &str, extra: &[&std::ffi::OsStr]| {
         let ds = dir.path().join(name);
         let mut args = vec![ep.as_os_str(), "--out".as_ref(), ds.as_os_str()];
         args.extend_from_slice(extra);
-        let out = convert(&args);
+        let out = convert_cli(&args);
         assert!(
             out.status.success(),
             "{}",
@@ -554,7 +541,7 @@ fn a_command_topic_gives_the_action_instead_of_the_next_tick() {
     // A command topic without messages is a clear error for that file.
     let over = format!("{}_command=/no/such/topic", arm.name);
     let ds = dir.path().join("none");
-    let out = convert(&[
+    let out = convert_cli(&[
         ep.as_os_str(),
         "--out".as_ref(),
         ds.as_os_str(),
