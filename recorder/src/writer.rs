@@ -303,3 +303,36 @@ impl WriterThread {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn times_are_rfc3339_utc_milliseconds() {
+        assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
+        assert_eq!(
+            rfc3339(1_700_000_000_123_456_789),
+            "2023-11-14T22:13:20.123Z"
+        );
+    }
+
+    #[test]
+    fn numbering_continues_after_kept_partial_and_discarded_episodes() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(next_free_index(dir.path()), 0);
+        assert_eq!(next_free_index(&dir.path().join("missing")), 0);
+        std::fs::create_dir(dir.path().join("discarded")).unwrap();
+        for name in [
+            "episode_000002.mcap",
+            "episode_000004.mcap.partial",
+            "discarded/episode_000007.mcap",
+            "episode_x.mcap",
+            "notes.txt",
+        ] {
+            std::fs::write(dir.path().join(name), b"").unwrap();
+        }
+        assert_eq!(next_free_index(dir.path()), 8);
+        assert_eq!(episode_file_name(8), "episode_000008.mcap");
+    }
+}

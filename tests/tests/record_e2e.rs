@@ -9,7 +9,9 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use scaledp::sim::{KeyStyle, SimOptions};
-use scaledp_recorder::{net, Command, EpisodeReport, Event, Outcome, Recorder, RecorderOptions};
+use scaledp_recorder::{
+    net, now_ns, Command, EpisodeReport, Event, Outcome, Recorder, RecorderOptions,
+};
 use scaledp_schema::msg::{header_stamp, Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{free_endpoint, run_python, small_bimanual, small_franka};
@@ -49,6 +51,8 @@ fn next_finished(recorder: &Recorder) -> EpisodeReport {
 struct Run {
     report: EpisodeReport,
     published: HashMap<String, Vec<Vec<u8>>>,
+    /// Wall clock (ns) just before `start` was sent and just after the episode finished.
+    wall_ns: (u64, u64),
     _dir: tempfile::TempDir,
 }
 
@@ -79,16 +83,19 @@ fn record_one(rig: Rig, keys: KeyStyle, seconds: f64) -> Run {
         .start(net::zenoh_config(None, &[endpoint], &[]).unwrap())
         .unwrap();
     wait_live(&recorder);
+    let before = now_ns();
     recorder.send(Command::Start);
     std::thread::sleep(Duration::from_secs_f64(seconds));
     recorder.send(Command::Stop(Outcome::Success));
     let report = next_finished(&recorder);
+    let after = now_ns();
     recorder.finish().unwrap();
     sim.stop();
     let published = std::mem::take(&mut *published.lock().unwrap());
     Run {
         report,
         published,
+        wall_ns: (before, after),
         _dir: dir,
     }
 }
@@ -106,6 +113,29 @@ fn read_rust(path: &Path) -> BTreeMap<String, Vec<(Vec<u8>, u64, u64)>> {
         ));
     }
     out
+}
+
+/// `ns` since the epoch as the recorder writes it: RFC 3339, UTC, milliseconds
+/// (`2023-11-14T22:13:20.000Z`), from the civil-from-days algorithm.
+fn rfc3339_millis(ns: u64) -> String {
+    let secs = ns / 1_000_000_000;
+    let (days, rem) = ((secs / 86_400) as i64, secs % 86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:03}Z",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60,
+        ns / 1_000_000 % 1000
+    )
 }
 
 fn sha(b: &[u8]) -> String {
@@ -183,6 +213,44 @@ fn recorded_episode_is_what_the_sim_published_and_ros2_tools_read_it() {
     assert_eq!(meta["outcome"], "success");
     assert_eq!(meta["task"], "pick up the red cube");
     assert_eq!(meta["rig_name"], "franka_2zed");
+    assert_eq!(meta["operator"], "test");
+    assert_eq!(meta["episode_index"], "0");
+    let version = meta["recorder_version"].as_str().unwrap();
+    assert_eq!(version, env!("CARGO_PKG_VERSION"), "one workspace version");
+    assert_eq!(
+        py["header"]["library"],
+        format!("scaledp-recorder {version}")
+    );
+    // Start and end: inside the test's own clock window, in order, after every message was
+    // received, and the readable forms agree with the nanosecond ones.
+    let ns = |k: &str| meta[k].as_str().unwrap().parse::<u64>().unwrap();
+    let (start, end) = (ns("start_time_ns"), ns("end_time_ns"));
+    let (before, after) = run.wall_ns;
+    assert!(
+        before <= start && start < end && end <= after,
+        "{before} {start} {end} {after}"
+    );
+    assert_eq!(meta["start_time"], rfc3339_millis(start));
+    assert_eq!(meta["end_time"], rfc3339_millis(end));
+    let duration: f64 = meta["duration_s"].as_str().unwrap().parse().unwrap();
+    assert!((duration - run.report.duration_s).abs() <= 5e-4);
+    let last_log = recorded.values().flatten().map(|m| m.1).max().unwrap();
+    assert!(start < last_log && last_log <= end);
+    // The start record (what a crashed episode keeps) agrees with the final one.
+    let start_meta = py["metadata"]["scaledp.episode.start"].as_object().unwrap();
+    for key in [
+        "episode_index",
+        "task",
+        "operator",
+        "rig_name",
+        "rig",
+        "start_time_ns",
+        "start_time",
+        "recorder_version",
+    ] {
+        assert_eq!(start_meta[key], meta[key], "{key}");
+    }
+    assert!(!start_meta.contains_key("outcome"));
     let counts: BTreeMap<String, usize> =
         serde_json::from_str(meta["message_counts"].as_str().unwrap()).unwrap();
     let dropped: BTreeMap<String, u64> =
@@ -293,7 +361,7 @@ fn zenoh_control_key_starts_stops_and_discards_episodes() {
         .unwrap();
     std::thread::sleep(Duration::from_millis(300));
     let mut paths = Vec::new();
-    for end in ["stop", "discard", "failure"] {
+    for end in ["stop", "discard", "failure", " Success\n"] {
         // Repeat `start` until the recorder opens the episode (the pedal's link may be new).
         let deadline = Instant::now() + Duration::from_secs(10);
         while recorder.status().episode.is_none() {
@@ -310,27 +378,176 @@ fn zenoh_control_key_starts_stops_and_discards_episodes() {
     }
     recorder.finish().unwrap();
     sim.stop();
-    let want: [(PathBuf, &str); 3] = [
-        (dir.path().join("episode_000000.mcap"), "unlabeled"),
+    let want: [(PathBuf, Outcome); 4] = [
+        (dir.path().join("episode_000000.mcap"), Outcome::Unlabeled),
         (
             dir.path().join("discarded/episode_000001.mcap"),
-            "discarded",
+            Outcome::Discarded,
         ),
-        (dir.path().join("episode_000002.mcap"), "failure"),
+        (dir.path().join("episode_000002.mcap"), Outcome::Failure),
+        (dir.path().join("episode_000003.mcap"), Outcome::Success),
     ];
+    assert_eq!(paths.len(), want.len());
     for ((path, outcome), report) in want.iter().zip(&paths) {
         assert_eq!(&report.summary.path, path);
-        assert_eq!(episode_metadata(path)["outcome"], *outcome);
+        assert_eq!(report.outcome, *outcome);
+        assert_eq!(episode_metadata(path)["outcome"], outcome.as_str());
         assert!(report.summary.messages.values().all(|n| *n > 0));
     }
     assert!(!dir.path().join("episode_000001.mcap").exists());
-    let statuses = statuses.lock().unwrap();
-    assert_eq!(
-        statuses
+    // The status key reports every finish with its outcome, in order (bounded wait: the
+    // last status may still be on its way to the pedal).
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let finished = loop {
+        let finished: Vec<serde_json::Value> = statuses
+            .lock()
+            .unwrap()
             .iter()
-            .filter(|s| s.contains("\"finished\""))
-            .count(),
-        3,
-        "{statuses:?}"
+            .map(|s| serde_json::from_str::<serde_json::Value>(s).unwrap())
+            .filter(|v| v["event"] == "finished")
+            .collect();
+        if finished.len() >= want.len() || Instant::now() > deadline {
+            break finished;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let outcomes: Vec<&str> = finished
+        .iter()
+        .map(|v| v["outcome"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        outcomes,
+        ["unlabeled", "discarded", "failure", "success"],
+        "{finished:?}"
     );
+}
+
+/// A 1-byte writer queue (a message is taken only while the queue is empty) and bursts put on
+/// the recorder's own session (no transport in between, so every message put is received):
+/// the queue overflows, and every message received during the episode is either in the file or
+/// counted as dropped on its own topic, in the report, the metadata, the status key and the
+/// live figures alike.
+#[test]
+fn queue_overflow_drops_are_counted_per_topic_and_reported() {
+    use zenoh::Wait;
+    let rig = small_franka();
+    let topics = rig.topics();
+    let dir = tempfile::tempdir().unwrap();
+    let prefix = format!("test/drops{}", std::process::id());
+    let recorder = RecorderOptions::new(rig, dir.path())
+        .task("t")
+        .queue_bytes(1)
+        .control_prefix(&prefix)
+        .start(net::zenoh_config(None, &[], &[free_endpoint()]).unwrap())
+        .unwrap();
+    let session = recorder.session().clone();
+    let statuses = Arc::new(Mutex::new(Vec::<serde_json::Value>::new()));
+    let sink = statuses.clone();
+    let _sub = session
+        .declare_subscriber(format!("{prefix}/status"))
+        .callback(move |s| {
+            let v = serde_json::from_slice(&s.payload().to_bytes()).unwrap();
+            sink.lock().unwrap().push(v);
+        })
+        .wait()
+        .unwrap();
+    let publishers: Vec<_> = topics
+        .iter()
+        .map(|t| {
+            session
+                .declare_publisher(scaledp_recorder::keys::bridge_key("", &t.topic))
+                .wait()
+                .unwrap()
+        })
+        .collect();
+
+    recorder.send(Command::Start);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while recorder.status().episode.is_none() {
+        assert!(Instant::now() < deadline, "the episode never opened");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // Round-robin bursts over every topic until each has lost a message (bounded: a writer
+    // that keeps up with 1000 back-to-back puts 20 times over is not plausible).
+    let mut published: Vec<Vec<Vec<u8>>> = vec![Vec::new(); topics.len()];
+    let deadline = Instant::now() + Duration::from_secs(60);
+    for burst in 0.. {
+        for _ in 0..250 {
+            for (i, (t, p)) in topics.iter().zip(&publishers).enumerate() {
+                let msg = scaledp_tests::numbered_message(t, published[i].len() as u64);
+                p.put(msg.clone()).wait().unwrap();
+                published[i].push(msg);
+            }
+        }
+        let all_dropped = recorder.status().topics.iter().all(|t| t.dropped > 0);
+        if all_dropped || burst >= 20 || Instant::now() > deadline {
+            break;
+        }
+    }
+    // Every put has reached the recorder's callback before the episode stops.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while recorder
+        .status()
+        .topics
+        .iter()
+        .zip(&published)
+        .any(|(t, p)| t.received < p.len() as u64)
+    {
+        assert!(Instant::now() < deadline, "{:?}", recorder.status().topics);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    recorder.send(Command::Stop(Outcome::Failure));
+    let report = next_finished(&recorder);
+    let live = recorder.status().topics;
+    let path = report.summary.path.clone();
+    let recorded = read_rust(&path);
+    let meta = episode_metadata(&path);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let finished = loop {
+        let found = statuses
+            .lock()
+            .unwrap()
+            .iter()
+            .find(|v| v["event"] == "finished")
+            .cloned();
+        if let Some(v) = found {
+            break v;
+        }
+        assert!(Instant::now() < deadline, "no 'finished' status");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    recorder.finish().unwrap();
+
+    let meta_dropped: BTreeMap<String, u64> = serde_json::from_str(&meta["dropped"]).unwrap();
+    let meta_counts: BTreeMap<String, u64> = serde_json::from_str(&meta["message_counts"]).unwrap();
+    assert_eq!(meta_dropped, report.dropped);
+    assert_eq!(meta_counts, report.summary.messages);
+    assert_eq!(meta["outcome"], "failure");
+    assert_eq!(
+        finished["dropped"],
+        serde_json::to_value(&report.dropped).unwrap()
+    );
+    // An empty queue always takes a message: the episode holds some, whichever topic won.
+    assert!(report.summary.messages.values().sum::<u64>() > 0);
+    for ((t, sent), status) in topics.iter().zip(&published).zip(&live) {
+        let topic = &t.topic;
+        let dropped = report.dropped[topic];
+        let written = report.summary.messages[topic];
+        let sent_n = sent.len() as u64;
+        assert!(dropped > 0, "{topic}: nothing dropped ({live:?})");
+        assert_eq!(written + dropped, sent_n, "{topic}: written + dropped");
+        assert_eq!(status.received, sent_n, "{topic}: received");
+        // Every drop happened inside this episode.
+        assert_eq!(status.dropped, dropped, "{topic}: live drop count");
+        // What was written is what was sent, in order, less the dropped messages.
+        let in_file = recorded.get(topic).map_or(&[][..], Vec::as_slice);
+        assert_eq!(in_file.len() as u64, written);
+        let mut rest = sent.iter();
+        for (k, (data, _, _)) in in_file.iter().enumerate() {
+            assert!(
+                rest.any(|s| s == data),
+                "{topic}: message {k} of the file was not sent, or out of order"
+            );
+        }
+    }
 }

@@ -1,0 +1,195 @@
+//! `scaledp record` as a process, fed over loopback Zenoh by the test itself: what the command
+//! line reports when its writer queue overflows.
+
+#![allow(clippy::unwrap_used)] // test code: a panic is the failure report
+
+use std::collections::BTreeMap;
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use scaledp_recorder::net;
+use scaledp_tests::{free_endpoint, numbered_message, scaledp_bin, small_franka, write_rig_file};
+use zenoh::qos::CongestionControl;
+use zenoh::Wait;
+
+/// Kills the child when dropped while it still runs, so a failing test never leaves it behind.
+struct Reap(Option<std::process::Child>);
+
+impl Drop for Reap {
+    fn drop(&mut self) {
+        if let Some(c) = self.0.as_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Waits (bounded) for the status event `event`, returning it.
+fn wait_status(rx: &mpsc::Receiver<serde_json::Value>, event: &str) -> serde_json::Value {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let left = deadline
+            .checked_duration_since(Instant::now())
+            .unwrap_or_else(|| panic!("no '{event}' status within 20 s"));
+        match rx.recv_timeout(left) {
+            Ok(v) if v["event"] == event => return v,
+            Ok(v) => assert_ne!(v["event"], "failed", "{v}"),
+            Err(e) => panic!("no '{event}' status: {e}"),
+        }
+    }
+}
+
+/// `--queue-mib 0` leaves a one-message queue; a burst on every topic overflows it. The
+/// episode's line on stdout, the session summary on stderr, the exit status (3: data lost), the
+/// status key and the file's metadata all report the same drops, and per topic the file holds
+/// every message sent but the dropped ones.
+#[test]
+fn record_command_reports_queue_drops_and_exits_3() {
+    let rig = small_franka();
+    let topics = rig.topics();
+    let dir = tempfile::tempdir().unwrap();
+    let rig_path = write_rig_file(dir.path(), &rig);
+    let out = dir.path().join("rec");
+    let endpoint = free_endpoint();
+    let prefix = format!("test/cli_drops{}", std::process::id());
+    let session =
+        net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap()).unwrap();
+    let (tx, statuses) = mpsc::channel::<serde_json::Value>();
+    let _sub = session
+        .declare_subscriber(format!("{prefix}/status"))
+        .callback(move |s| {
+            let _ = tx.send(serde_json::from_slice(&s.payload().to_bytes()).unwrap());
+        })
+        .wait()
+        .unwrap();
+    let mut child = Reap(Some(
+        Command::new(scaledp_bin())
+            .args([
+                "record",
+                "--task",
+                "drop test",
+                "--operator",
+                "tester",
+                "--episodes",
+                "1",
+                "--queue-mib",
+                "0",
+                "--no-keyboard",
+                "-q",
+                "--control-prefix",
+                &prefix,
+                "--connect",
+                &endpoint,
+            ])
+            .arg("--rig")
+            .arg(&rig_path)
+            .arg("--out")
+            .arg(&out)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
+    let control = |word: &str| {
+        // Blocking like the data, on the same link: it arrives after every message put before.
+        session
+            .put(format!("{prefix}/control"), word)
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .unwrap();
+    };
+    // Repeat `start` until the recorder, connecting in the background, obeys it.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let started = loop {
+        assert!(Instant::now() < deadline, "the recorder never started");
+        if let Some(c) = child.0.as_mut().unwrap().try_wait().unwrap() {
+            panic!("scaledp record exited early: {c}");
+        }
+        control("start");
+        match statuses.recv_timeout(Duration::from_millis(200)) {
+            Ok(v) if v["event"] == "started" => break v,
+            _ => {}
+        }
+    };
+    assert_eq!(started["episode"], 0);
+
+    let publishers: Vec<_> = topics
+        .iter()
+        .map(|t| {
+            session
+                .declare_publisher(scaledp_recorder::keys::bridge_key("", &t.topic))
+                .congestion_control(CongestionControl::Block)
+                .wait()
+                .unwrap()
+        })
+        .collect();
+    let per_topic = 300;
+    for k in 0..per_topic {
+        for (t, p) in topics.iter().zip(&publishers) {
+            p.put(numbered_message(t, k)).wait().unwrap();
+        }
+    }
+    control("success");
+    let finished = wait_status(&statuses, "finished");
+
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(s) = child.0.as_mut().unwrap().try_wait().unwrap() {
+            break s;
+        }
+        assert!(Instant::now() < deadline, "scaledp record did not exit");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let output = child.0.take().unwrap().wait_with_output().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr),
+    );
+    assert_eq!(status.code(), Some(3), "exit status; stderr: {stderr}");
+
+    let path = out.join("episode_000000.mcap");
+    let bytes = std::fs::read(&path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let idx = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "scaledp.episode")
+        .unwrap();
+    let meta = mcap::read::metadata(&bytes, idx).unwrap().metadata;
+    assert_eq!(meta["outcome"], "success");
+    assert_eq!(meta["operator"], "tester");
+    let dropped: BTreeMap<String, u64> = serde_json::from_str(&meta["dropped"]).unwrap();
+    let counts: BTreeMap<String, u64> = serde_json::from_str(&meta["message_counts"]).unwrap();
+    assert_eq!(finished["dropped"], serde_json::to_value(&dropped).unwrap());
+    assert_eq!(finished["messages"], serde_json::to_value(&counts).unwrap());
+    let mut in_file: BTreeMap<String, u64> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        *in_file.entry(m.unwrap().channel.topic.clone()).or_default() += 1;
+    }
+    for t in &topics {
+        let (written, lost) = (counts[&t.topic], dropped[&t.topic]);
+        assert_eq!(written + lost, per_topic, "{}: written + dropped", t.topic);
+        assert_eq!(in_file.get(&t.topic).copied().unwrap_or(0), written);
+    }
+    let (lost, written): (u64, u64) = (dropped.values().sum(), counts.values().sum());
+    assert!(lost > 0, "the queue never overflowed: {dropped:?}");
+    assert!(written > 0);
+
+    // stdout: `<path>\tsuccess\t<s> s\t<n> messages\t<lost> lost`; stderr: the session total.
+    let line = stdout.lines().next().unwrap_or_default();
+    let fields: Vec<&str> = line.split('\t').collect();
+    assert_eq!(fields.len(), 5, "{line:?}");
+    assert_eq!(fields[0], path.display().to_string());
+    assert_eq!(fields[1], "success");
+    assert_eq!(fields[3], format!("{written} messages"));
+    assert_eq!(fields[4], format!("{lost} lost"));
+    assert!(
+        stderr.contains(&format!(
+            "1 episodes recorded in {}, 0 failed, {lost} messages lost",
+            out.display()
+        )),
+        "{stderr}"
+    );
+}
