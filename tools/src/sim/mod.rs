@@ -387,3 +387,121 @@ impl Stream {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+    use std::sync::Mutex;
+    use std::time::Instant;
+
+    use scaledp_recorder::net;
+    use scaledp_schema::msg::header_stamp;
+
+    use super::*;
+
+    /// An origin long past: every message is due at once, so the streams run flat out and the
+    /// run's timing cannot shape what they publish.
+    const T0: u64 = 1_700_000_000_000_000_000;
+    const N: usize = 40;
+
+    fn small_rig() -> Rig {
+        let mut rig = Rig::builtin("franka_2zed").unwrap();
+        for c in &mut rig.cameras {
+            c.width = 32;
+            c.height = 24;
+        }
+        rig
+    }
+
+    /// The first `N` messages of every topic the live simulator publishes under `seed` (on a
+    /// session that only listens on a free loopback port, so nothing else receives them).
+    fn first_messages(rig: &Rig, seed: u64) -> BTreeMap<String, Vec<Vec<u8>>> {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .unwrap()
+            .port();
+        let listen = [format!("tcp/127.0.0.1:{port}")];
+        let session = net::open(net::zenoh_config(None, &[], &listen).unwrap()).unwrap();
+        let got: Arc<Mutex<BTreeMap<String, Vec<Vec<u8>>>>> = Arc::default();
+        let sink = got.clone();
+        let sim = SimOptions::new(rig.clone())
+            .seed(seed)
+            .start_time_ns(T0)
+            .on_publish(Arc::new(move |topic, payload| {
+                let mut got = sink.lock().unwrap();
+                let msgs = got.entry(topic.to_string()).or_default();
+                if msgs.len() < N {
+                    msgs.push(payload.to_vec());
+                }
+            }))
+            .spawn(&session)
+            .unwrap();
+        let full = || {
+            let got = got.lock().unwrap();
+            got.len() == rig.topics().len() && got.values().all(|m| m.len() == N)
+        };
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while !full() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        sim.stop();
+        session.close().wait().unwrap();
+        assert!(
+            full(),
+            "the streams did not publish {N} messages each within 60 s"
+        );
+        let out = std::mem::take(&mut *got.lock().unwrap());
+        out
+    }
+
+    #[test]
+    fn a_seed_fixes_the_live_streams_and_another_seed_changes_them() {
+        let rig = small_rig();
+        let a = first_messages(&rig, 3);
+        assert_eq!(a, first_messages(&rig, 3), "same seed, same messages");
+        let other = first_messages(&rig, 4);
+        for t in rig.topics() {
+            let (mine, theirs) = (&a[&t.topic], &other[&t.topic]);
+            // Stamps on the rate's grid but for the seeded jitter (±0.5 ms for cameras and the
+            // gripper, ±20 µs for the arm), which is not zero.
+            let half_width = if t.topic == "/franka/joint_states" {
+                0.02e6
+            } else {
+                0.5e6
+            };
+            let period = 1e9 / t.rate_hz;
+            let stamps: Vec<u64> = mine
+                .iter()
+                .map(|m| header_stamp(m).unwrap().as_ns())
+                .collect();
+            for (k, s) in stamps.iter().enumerate() {
+                let jitter = (s - T0) as f64 - k as f64 * period;
+                assert!(jitter.abs() <= half_width + 1.0, "{}: {jitter} ns", t.topic);
+            }
+            let off_grid = stamps
+                .iter()
+                .enumerate()
+                .filter(|(k, s)| ((**s - T0) as f64 - *k as f64 * period).abs() > 1.0)
+                .count();
+            assert!(off_grid > N / 2, "{}: no jitter", t.topic);
+            let their_stamps: Vec<u64> = theirs
+                .iter()
+                .map(|m| header_stamp(m).unwrap().as_ns())
+                .collect();
+            assert_ne!(stamps, their_stamps, "{}: same jitter", t.topic);
+            if t.is_image {
+                let pixels = |m: &[Vec<u8>]| -> Vec<Vec<u8>> {
+                    m.iter().map(|x| Image::from_cdr(x).unwrap().data).collect()
+                };
+                assert!(
+                    pixels(mine)
+                        .iter()
+                        .zip(&pixels(theirs))
+                        .all(|(x, y)| x != y),
+                    "{}: same pictures under another seed",
+                    t.topic
+                );
+            }
+        }
+    }
+}

@@ -304,3 +304,216 @@ pub fn table_height(scene: &Scene) -> f64 {
         0.0
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use scaledp_schema::rig::Rig;
+
+    use super::*;
+
+    const CUBE_RGB: [[u8; 3]; 2] = [[215, 40, 45], [150, 20, 25]];
+
+    /// The Franka rig with 160×120 cameras: camera 0 ("front") is fixed in the world, camera 1
+    /// ("wrist") rides on the flange.
+    fn rig() -> Rig {
+        let mut rig = Rig::builtin("franka_2zed").unwrap();
+        for c in &mut rig.cameras {
+            c.width = 160;
+            c.height = 120;
+        }
+        rig
+    }
+
+    fn draw(scene: &Scene, view: &View, state: &SceneState) -> Vec<u8> {
+        let mut out = Vec::new();
+        render(scene, view, state, "rgb8", table_height(scene), &mut out);
+        out
+    }
+
+    fn pixel(img: &[u8], view: &View, (x, y): (f64, f64)) -> [u8; 3] {
+        let i = (y as usize * view.width + x as usize) * 3;
+        [img[i], img[i + 1], img[i + 2]]
+    }
+
+    /// (x, y, depth) of world point `p` in `view`, as the renderer projects it.
+    fn project(scene: &Scene, view: &View, state: &SceneState, p: DVec3) -> (f64, f64, f64) {
+        let c = view
+            .world_from_camera(scene, state)
+            .inverse()
+            .transform_point3(p);
+        assert!(c.z > 0.03, "{p} is behind the camera");
+        (
+            view.cx + view.f_px * c.x / c.z,
+            view.cy + view.f_px * c.y / c.z,
+            c.z,
+        )
+    }
+
+    /// Pixels (x, y) where two images of `view` differ.
+    fn changed(view: &View, a: &[u8], b: &[u8]) -> Vec<(f64, f64)> {
+        (0..view.width * view.height)
+            .filter(|i| a[i * 3..i * 3 + 3] != b[i * 3..i * 3 + 3])
+            .map(|i| ((i % view.width) as f64 + 0.5, (i / view.width) as f64 + 0.5))
+            .collect()
+    }
+
+    fn inside(view: &View, (x, y): (f64, f64)) -> bool {
+        (0.0..view.width as f64).contains(&x) && (0.0..view.height as f64).contains(&y)
+    }
+
+    #[test]
+    fn the_cube_is_drawn_where_it_projects_and_nothing_else_changes() {
+        let rig = rig();
+        let scene = Scene::new(&rig, 1);
+        let view = View::for_camera(&scene, &rig.cameras[0], 0);
+        assert!(matches!(view.mount, Mount::World(_)));
+        let a = scene.state_at(0.0);
+        let mut b = a.clone();
+        b.arms[0].cube_world += DVec3::new(0.0, 0.12, 0.0);
+        let (img_a, img_b) = (draw(&scene, &view, &a), draw(&scene, &view, &b));
+        assert_eq!(img_a.len(), 160 * 120 * 3);
+        assert_eq!(
+            img_a,
+            draw(&scene, &view, &a),
+            "rendering is a pure function"
+        );
+
+        let pa = project(&scene, &view, &a, a.arms[0].cube_world);
+        let pb = project(&scene, &view, &b, b.arms[0].cube_world);
+        for p in [pa, pb] {
+            assert!(inside(&view, (p.0, p.1)), "cube out of view at {p:?}");
+        }
+        assert_eq!(pixel(&img_a, &view, (pa.0, pa.1)), CUBE_RGB[0]);
+        assert_eq!(pixel(&img_b, &view, (pb.0, pb.1)), CUBE_RGB[0]);
+        assert!(!CUBE_RGB.contains(&pixel(&img_b, &view, (pa.0, pa.1))));
+        assert!(!CUBE_RGB.contains(&pixel(&img_a, &view, (pb.0, pb.1))));
+        // Only the cube moved: every changed pixel lies within the cube's drawn radius (plus
+        // its 1.2 cm half-height and a pixel of rounding) of where it was or now is.
+        let changed = changed(&view, &img_a, &img_b);
+        assert!(changed.len() > 10, "{} pixels changed", changed.len());
+        for (x, y) in changed {
+            let near = [pa, pb].iter().any(|&(px, py, depth)| {
+                let r = view.f_px * (0.026 + 0.012) / depth + 1.5;
+                (x - px).hypot(y - py) <= r
+            });
+            assert!(near, "pixel ({x}, {y}) changed, away from the cube");
+        }
+    }
+
+    #[test]
+    fn the_gripper_opening_is_drawn_at_the_fingers() {
+        let rig = rig();
+        let scene = Scene::new(&rig, 1);
+        let view = View::for_camera(&scene, &rig.cameras[0], 0);
+        let open = scene.state_at(0.0);
+        assert!(open.arms[0].gripper_width_m > 0.07);
+        let mut closed = open.clone();
+        closed.arms[0].gripper_width_m = 0.0;
+        let changed = changed(
+            &view,
+            &draw(&scene, &view, &open),
+            &draw(&scene, &view, &closed),
+        );
+        assert!(!changed.is_empty(), "the gripper opening is not drawn");
+        // The fingers run from the palm (5 cm behind the TCP) to the TCP, ± (width / 2 + 8 mm)
+        // along the tool y axis: every changed pixel is within the box of those points
+        // (finger radius 6 mm, palm radius 1 cm, a pixel of rounding).
+        let (arm, _) = scene.arms().next().unwrap();
+        let s = &open.arms[0];
+        let flange = s.world_from_base * arm.model.base_from_flange(&s.q).unwrap();
+        let tcp = flange * super::super::scene::flange_from_fingertips(arm);
+        let (o, y_axis, z_axis) = (
+            tcp.w_axis.truncate(),
+            tcp.y_axis.truncate(),
+            tcp.z_axis.truncate(),
+        );
+        let mut corners = Vec::new();
+        for end in [o, o - z_axis * 0.05] {
+            for off in [-0.048, 0.048, -0.008, 0.008] {
+                corners.push(project(&scene, &view, &open, end + y_axis * off));
+            }
+        }
+        let depth = corners.iter().map(|c| c.2).fold(f64::INFINITY, f64::min);
+        let pad = view.f_px * 0.01 / depth + 1.5;
+        let (x0, x1) = corners.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
+            (lo.min(c.0 - pad), hi.max(c.0 + pad))
+        });
+        let (y0, y1) = corners.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
+            (lo.min(c.1 - pad), hi.max(c.1 + pad))
+        });
+        for (x, y) in changed {
+            assert!(
+                (x0..=x1).contains(&x) && (y0..=y1).contains(&y),
+                "pixel ({x}, {y}) changed outside the gripper's box x {x0}..{x1}, y {y0}..{y1}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_wrist_camera_moves_with_the_arm_and_the_front_camera_does_not() {
+        let rig = rig();
+        let scene = Scene::new(&rig, 1);
+        let front = View::for_camera(&scene, &rig.cameras[0], 0);
+        let wrist = View::for_camera(&scene, &rig.cameras[1], 1);
+        assert!(matches!(wrist.mount, Mount::Wrist { arm: 0, .. }));
+        // Rest, then the arm lowered to the pick (the cube not yet lifted).
+        let (a, b) = (
+            scene.state_at(0.0),
+            scene.state_at(0.25 * super::super::scene::CYCLE_S),
+        );
+        assert_ne!(a.arms[0].q, b.arms[0].q);
+        assert_eq!(a.arms[0].cube_world, b.arms[0].cube_world);
+        assert_eq!(
+            front.world_from_camera(&scene, &a),
+            front.world_from_camera(&scene, &b)
+        );
+        assert_ne!(
+            wrist.world_from_camera(&scene, &a),
+            wrist.world_from_camera(&scene, &b)
+        );
+        let n = (wrist.width * wrist.height) as f64;
+        let moved = changed(&wrist, &draw(&scene, &wrist, &a), &draw(&scene, &wrist, &b));
+        assert!(
+            moved.len() as f64 > 0.2 * n,
+            "{} of {n} changed",
+            moved.len()
+        );
+        // Above the pick, the wrist camera looks down at the cube.
+        let p = project(&scene, &wrist, &b, b.arms[0].cube_world);
+        assert!(
+            inside(&wrist, (p.0, p.1)),
+            "cube out of the wrist view: {p:?}"
+        );
+    }
+
+    #[test]
+    fn every_encoding_holds_the_same_picture() {
+        let rig = rig();
+        let scene = Scene::new(&rig, 2);
+        let view = View::for_camera(&scene, &rig.cameras[0], 0);
+        let state = scene.state_at(1.3);
+        let table_z = table_height(&scene);
+        let encode = |encoding: &str| {
+            let mut out = Vec::new();
+            render(&scene, &view, &state, encoding, table_z, &mut out);
+            out
+        };
+        let rgb = encode("rgb8");
+        for (encoding, channels) in [("bgr8", 3), ("rgba8", 4), ("bgra8", 4), ("mono8", 1)] {
+            let img = encode(encoding);
+            assert_eq!(img.len(), view.width * view.height * channels, "{encoding}");
+            for (px, src) in img.chunks(channels).zip(rgb.chunks(3)) {
+                let (r, g, b) = (src[0], src[1], src[2]);
+                let want: Vec<u8> = match encoding {
+                    "bgr8" => vec![b, g, r],
+                    "rgba8" => vec![r, g, b, 255],
+                    "bgra8" => vec![b, g, r, 255],
+                    _ => vec![
+                        ((u16::from(r) * 77 + u16::from(g) * 150 + u16::from(b) * 29) >> 8) as u8,
+                    ],
+                };
+                assert_eq!(px, want, "{encoding}");
+            }
+        }
+    }
+}

@@ -194,6 +194,53 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_cube_waits_at_the_pick_rides_in_the_fingers_and_stays_at_the_place() {
+        for name in Rig::builtin_names() {
+            let rig = Rig::builtin(name).unwrap();
+            let scene = Scene::new(&rig, 11);
+            let mut picks = Vec::new();
+            for cycle in 0..3 {
+                let at = |u: f64| scene.state_at((f64::from(cycle) + u) * CYCLE_S);
+                for arm in 0..rig.arms.len() {
+                    let cube = |u: f64| at(u).arms[arm].cube_world;
+                    let fingers = |u: f64| scene.tcp_world(arm, &at(u).arms[arm].q);
+                    let width = |u: f64| at(u).arms[arm].gripper_width_m;
+                    let (pick, place) = (cube(0.0), cube(0.8));
+                    for u in [0.05, 0.2, 0.27] {
+                        assert_eq!(cube(u), pick, "{name}: the cube moved before the grasp");
+                    }
+                    assert!(
+                        (fingers(0.25) - pick).length() < 1e-9,
+                        "{name}: missed the cube"
+                    );
+                    assert!(width(0.3) < width(0.2), "{name}: the gripper did not close");
+                    for u in [0.35, 0.5, 0.65] {
+                        assert!(
+                            (fingers(u) - cube(u)).length() < 1e-9,
+                            "{name}: the cube left the fingers at {u}"
+                        );
+                    }
+                    assert!((fingers(0.74) - place).length() < 1e-9);
+                    for u in [0.9, 0.99] {
+                        assert_eq!(cube(u), place, "{name}: the cube moved after the place");
+                    }
+                    assert!((place - pick).length() > 0.05, "{name}: carried nowhere");
+                    picks.push(pick);
+                }
+            }
+            // Each cycle and each arm has its own pick spot.
+            for (i, a) in picks.iter().enumerate() {
+                assert!(picks[i + 1..].iter().all(|b| (*a - *b).length() > 1e-3));
+            }
+            let other = Scene::new(&rig, 12).state_at(0.0);
+            assert_ne!(
+                other.arms[0].cube_world,
+                scene.state_at(0.0).arms[0].cube_world
+            );
+        }
+    }
+
+    #[test]
     fn motion_is_smooth_deterministic_and_within_limits() {
         for name in Rig::builtin_names() {
             let rig = Rig::builtin(name).unwrap();
