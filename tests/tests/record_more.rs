@@ -1,5 +1,5 @@
 //! `scaledp record` as a process, fed over loopback Zenoh by the test itself: what the command
-//! line reports when its writer queue overflows.
+//! line reports when its writer queue overflows, and an operator driving it from a terminal.
 
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
@@ -9,7 +9,9 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use scaledp_recorder::net;
-use scaledp_tests::{free_endpoint, numbered_message, scaledp_bin, small_franka, write_rig_file};
+use scaledp_tests::{
+    free_endpoint, numbered_message, python, scaledp_bin, small_franka, workspace, write_rig_file,
+};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
@@ -192,4 +194,142 @@ fn record_command_reports_queue_drops_and_exits_3() {
         )),
         "{stderr}"
     );
+}
+
+/// An operator at the terminal: `scaledp record` on a pseudo-terminal (`tests/py/pty_keys.py`)
+/// with no `--no-keyboard`, driven by keys only. Space starts, `y` ends as success, space starts
+/// again, `d` discards, `q` quits; the status key, the files and the terminal all agree.
+#[test]
+fn keys_on_a_terminal_start_end_discard_and_quit() {
+    let rig = small_franka();
+    let topics = rig.topics();
+    let dir = tempfile::tempdir().unwrap();
+    let rig_path = write_rig_file(dir.path(), &rig);
+    let out = dir.path().join("rec");
+    let endpoint = free_endpoint();
+    let prefix = format!("test/keys{}", std::process::id());
+    let session =
+        net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap()).unwrap();
+    let (tx, statuses) = mpsc::channel::<serde_json::Value>();
+    let _sub = session
+        .declare_subscriber(format!("{prefix}/status"))
+        .callback(move |s| {
+            let _ = tx.send(serde_json::from_slice(&s.payload().to_bytes()).unwrap());
+        })
+        .wait()
+        .unwrap();
+    let publishers: Vec<_> = topics
+        .iter()
+        .map(|t| {
+            session
+                .declare_publisher(scaledp_recorder::keys::bridge_key("", &t.topic))
+                .congestion_control(CongestionControl::Block)
+                .wait()
+                .unwrap()
+        })
+        .collect();
+    let mut driver = Reap(Some(
+        Command::new(python())
+            .arg(workspace().join("tests/py/pty_keys.py"))
+            .args(["30", "--"])
+            .arg(scaledp_bin())
+            .args(["record", "--task", "keys", "--operator", "kb", "-q"])
+            .args(["--control-prefix", &prefix, "--connect", &endpoint])
+            .arg("--rig")
+            .arg(&rig_path)
+            .arg("--out")
+            .arg(&out)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap(),
+    ));
+    // Keys act at once, but the status only reaches us once the recorder has connected and
+    // subscribed: wait for its subscriptions to match our publishers first.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while !publishers
+        .iter()
+        .all(|p| p.matching_status().wait().unwrap().matching())
+    {
+        assert!(Instant::now() < deadline, "the recorder never subscribed");
+        if let Some(c) = driver.0.as_mut().unwrap().try_wait().unwrap() {
+            panic!("the terminal driver exited early: {c}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut keys = driver.0.as_mut().unwrap().stdin.take().unwrap();
+    let mut press = |key: &str| {
+        use std::io::Write;
+        writeln!(keys, "{key}").unwrap();
+        keys.flush().unwrap();
+    };
+    let per_topic = 20;
+    let mut episode = |end_key: &str, index: u64, outcome: &str| {
+        press("space");
+        let started = wait_status(&statuses, "started");
+        assert_eq!(started["episode"], index);
+        for k in 0..per_topic {
+            for (t, p) in topics.iter().zip(&publishers) {
+                p.put(numbered_message(t, k)).wait().unwrap();
+            }
+        }
+        press(end_key);
+        let finished = wait_status(&statuses, "finished");
+        assert_eq!(finished["episode"], index);
+        assert_eq!(finished["outcome"], outcome);
+        finished
+    };
+    let kept = episode("y", 0, "success");
+    episode("d", 1, "discarded");
+    press("q");
+    drop(keys); // end of keys: the driver now waits for the exit
+    let output = driver.0.take().unwrap().wait_with_output().unwrap();
+    assert!(output.status.success());
+    let run: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let screen = run["output"].as_str().unwrap();
+    assert_eq!(run["returncode"], 0, "{screen}");
+
+    // The terminal: the key help, a status line, one line per episode, the session total.
+    assert!(screen.contains("[space] start/stop"), "{screen}");
+    let kept_path = out.join("episode_000000.mcap");
+    let discarded_path = out.join("discarded/episode_000001.mcap");
+    for (path, outcome) in [(&kept_path, "success"), (&discarded_path, "discarded")] {
+        assert!(path.exists(), "{} is missing", path.display());
+        assert!(
+            screen.contains(&format!("{}\t{outcome}\t", path.display())),
+            "{screen}"
+        );
+    }
+    assert!(
+        screen.contains(&format!("2 episodes recorded in {}", out.display())),
+        "{screen}"
+    );
+    assert!(!out.join("episode_000001.mcap").exists());
+
+    // The kept file: its metadata and every message the status reported.
+    let bytes = std::fs::read(&kept_path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let idx = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "scaledp.episode")
+        .unwrap();
+    let meta = mcap::read::metadata(&bytes, idx).unwrap().metadata;
+    assert_eq!(meta["outcome"], "success");
+    assert_eq!(meta["operator"], "kb");
+    assert_eq!(meta["task"], "keys");
+    let counts: BTreeMap<String, u64> = serde_json::from_str(&meta["message_counts"]).unwrap();
+    assert_eq!(kept["messages"], serde_json::to_value(&counts).unwrap());
+    let mut in_file: BTreeMap<String, u64> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        *in_file.entry(m.unwrap().channel.topic.clone()).or_default() += 1;
+    }
+    for t in &topics {
+        // Keys and data travel different paths, so a message put just before `y` may land
+        // after the stop; each topic holds some and at most what was sent.
+        let n = in_file.get(&t.topic).copied().unwrap_or(0);
+        assert!((1..=per_topic).contains(&n), "{}: {n}", t.topic);
+        assert_eq!(counts[&t.topic], n, "{}", t.topic);
+    }
 }
