@@ -1,5 +1,6 @@
-//! Time alignment on capture stamps: a uniform grid of ticks at the target rate, its phase
-//! chosen so that synchronised cameras agree on their frames (see [`grid_phase`]); at each tick
+//! Time alignment on capture stamps: a uniform grid of ticks at the target rate, a quarter
+//! frame after the cameras' frame instants so that synchronised cameras agree on their frames
+//! (see [`first_tick`]); at each tick
 //! every camera gives its latest frame at or before the tick and every joint stream is linearly
 //! interpolated. A camera frame older than `stale_periods` frame periods, or a joint stream with
 //! no samples around the tick, makes the tick invalid; invalid ticks at either end are trimmed,
@@ -138,7 +139,15 @@ pub fn align(
         return Err("the streams do not overlap in time".into());
     }
     let step_ns = 1e9 / fps;
-    let start = start + grid_phase(cameras, start, end, step_ns);
+    let min_camera_period_s = cameras
+        .iter()
+        .map(|c| c.period_s)
+        .fold(f64::INFINITY, f64::min);
+    let latest_camera_first = cameras.iter().map(|c| c.stamps_ns[0]).max();
+    let start = first_tick(start, latest_camera_first, min_camera_period_s, step_ns);
+    if end < start {
+        return Err("the streams overlap for less than a tick".into());
+    }
     let n = ((end - start) as f64 / step_ns).floor() as usize + 1;
     // Every stream has messages all through [start, end], and a tick is only valid with a recent
     // sample of each, so a grid far denser than the busiest stream cannot be an episode: it is a
@@ -224,55 +233,32 @@ pub fn align(
     })
 }
 
-/// Candidate grid phases tried by [`grid_phase`], over one frame period of the fastest camera.
-const PHASES: usize = 32;
-/// Ticks scored per candidate phase.
-const PHASE_SAMPLES: usize = 256;
-
-/// Offset (ns) of the first tick after `start` that keeps the cameras' chosen frames closest
-/// together, then freshest. A grid started on a frame stamp puts every tick on the frame
-/// instants of synchronised cameras, where capture jitter makes each camera pick the current or
-/// the previous frame by chance: views a whole frame period apart at one tick. Ticks a little
-/// after the frame instants pick the same capture on every camera.
-fn grid_phase(cameras: &[Stream], start: u64, end: u64, step_ns: f64) -> u64 {
-    let period_ns = cameras
-        .iter()
-        .map(|c| c.period_s * 1e9)
-        .fold(step_ns, f64::min);
-    if cameras.is_empty() || period_ns.is_nan() || period_ns < 1.0 {
-        return 0;
-    }
-    let span = (end - start) as f64;
-    let score = |phase: f64| {
-        let n = ((span - phase) / step_ns).floor();
-        if n < 0.0 {
-            return (f64::INFINITY, f64::INFINITY);
-        }
-        let samples = PHASE_SAMPLES.min(n as usize + 1);
-        let (mut skew, mut age) = (0.0, 0.0);
-        for j in 0..samples {
-            let k = (j as f64 * n / samples.max(2).saturating_sub(1) as f64).round();
-            let t = start + (phase + k * step_ns).round() as u64;
-            let (mut lo, mut hi) = (u64::MAX, 0);
-            for c in cameras {
-                let s = c.stamps_ns[c.latest_at(t).unwrap_or(0)];
-                lo = lo.min(s);
-                hi = hi.max(s);
-                age += t.saturating_sub(s) as f64;
-            }
-            skew += (hi - lo) as f64;
-        }
-        (skew, age)
+/// The first tick: a quarter of the fastest camera's frame period after the latest camera's
+/// first frame, then on at `step_ns` intervals to the first such instant at or after `start`.
+/// Ticks on the frame instants would let capture jitter split synchronised cameras a whole frame
+/// apart (one camera's frame stamped a little before the tick, the other's a little after);
+/// a quarter period later every camera's capture of that instant is in. Shared with
+/// [`crate::prefetch`], which must predict the same ticks while the file streams past.
+pub fn first_tick(
+    start: u64,
+    latest_camera_first: Option<u64>,
+    min_camera_period_s: f64,
+    step_ns: f64,
+) -> u64 {
+    let Some(anchor) = latest_camera_first else {
+        return start;
     };
-    let mut best = (0.0, score(0.0));
-    for i in 1..PHASES {
-        let phase = i as f64 * period_ns / PHASES as f64;
-        let s = score(phase);
-        if s.0 < best.1 .0 || (s.0 == best.1 .0 && s.1 < best.1 .1) {
-            best = (phase, s);
-        }
+    if !(min_camera_period_s.is_finite() && min_camera_period_s > 0.0 && step_ns > 0.0) {
+        return start;
     }
-    best.0.round() as u64
+    let origin = anchor.saturating_add((min_camera_period_s * 1e9 / 4.0).round() as u64);
+    if origin >= start {
+        return origin;
+    }
+    let k = ((start - origin) as f64 / step_ns).ceil();
+    origin
+        .saturating_add((k * step_ns).round() as u64)
+        .max(start)
 }
 
 fn stream_report(s: &Stream) -> StreamReport {
@@ -351,10 +337,12 @@ mod tests {
             "{} s",
             a.report.max_camera_skew_s
         );
-        // Every tick takes the same capture (index) from both cameras, at most a few ms old.
+        // Every tick takes the same capture (index) from both cameras, a quarter frame (8.3 ms)
+        // old give or take the jitter.
         for (t, f) in a.ticks_ns.iter().zip(&a.frames) {
             assert_eq!(f[0], f[1]);
-            assert!(t - cams[0].stamps_ns[f[0]] < 5_000_000);
+            let age = t - cams[0].stamps_ns[f[0]];
+            assert!((7_900_000..=8_800_000).contains(&age), "{age} ns");
         }
     }
 

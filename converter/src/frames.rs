@@ -119,6 +119,8 @@ pub struct McapFrames {
     /// Frames encoded during the first read, per `spec`.
     ready: Mutex<Encodings>,
     spec: Option<EncodeSpec>,
+    /// Frames fetched by a second read so far (a diagnostic).
+    read_again: std::sync::atomic::AtomicUsize,
 }
 
 impl McapFrames {
@@ -132,6 +134,11 @@ impl McapFrames {
     /// Frames encoded during the first read and not taken yet (a diagnostic).
     pub fn prefetched(&self) -> usize {
         self.ready.lock().map_or(0, |r| r.len())
+    }
+
+    /// Frames the first read missed, fetched by reading the file again (a diagnostic).
+    pub fn read_again(&self) -> usize {
+        self.read_again.load(std::sync::atomic::Ordering::Relaxed)
     }
 }
 
@@ -178,6 +185,8 @@ impl FrameStore for McapFrames {
         if left == 0 {
             return Ok(out);
         }
+        self.read_again
+            .fetch_add(left, std::sync::atomic::Ordering::Relaxed);
         let mut ordinal: BTreeMap<String, usize> = BTreeMap::new();
         let (read, done) = encode_while(path, spec, |submit| {
             stream(&self.path, &mut |topic, log_time_ns, payload, _| {
@@ -310,6 +319,7 @@ pub(crate) fn read_mcap_hashed(
             frame_types,
             ready: Mutex::new(ready),
             spec,
+            read_again: Default::default(),
         },
     ))
 }

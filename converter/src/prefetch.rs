@@ -2,11 +2,11 @@
 //! streams past, so that they are decoded, resized and encoded during the one read instead of on
 //! a second read (decompressing every camera byte again).
 //!
-//! Alignment (see [`crate::align`]) puts ticks at `start + round(k × period)`, `start` being the
-//! latest first stamp of the rig's cameras, arms and grippers, and gives each tick each camera's
-//! latest frame at or before it. So once `start` is known, frame `i` of a camera is picked only if
-//! a tick falls in `[stamp i, stamp i+1)`, which is known when frame `i + 1` arrives; the last
-//! frame is kept too. That is a superset of the frames alignment picks (it does not know where the
+//! Alignment (see [`crate::align`]) puts ticks at `first + round(k × period)`, `first` following
+//! from the first stamps of the rig's cameras, arms and grippers ([`first_tick`]), and gives each
+//! tick each camera's latest frame at or before it. So once every stream has started, frame `i`
+//! of a camera is picked only if a tick falls in `[stamp i, stamp i+1)`, which is known when frame
+//! `i + 1` arrives; the last frame is kept too. That is a superset of the frames alignment picks (it does not know where the
 //! episode ends or which ticks are trimmed). It is a guess all the same (the rig may come from
 //! the end-of-file metadata, stamps may run backwards): the conversion takes what it needs from
 //! here and reads the file again only for frames this missed.
@@ -14,6 +14,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
+use crate::align::first_tick;
 use crate::encode_pool::FrameJob;
 use crate::episode::ConvertOptions;
 use crate::mcap_stream::{FrameBytes, Metadata, Payload};
@@ -36,7 +37,7 @@ struct Candidate {
 struct Camera {
     /// The latest frame (its successor is not known yet).
     latest: Option<Candidate>,
-    /// Frames with their successor's stamp, waiting for `start`.
+    /// Frames with their successor's stamp, waiting for the first tick.
     held: Vec<(Candidate, u64)>,
 }
 
@@ -44,12 +45,14 @@ struct Camera {
 struct Plan {
     use_log_time: bool,
     period_ns: f64,
+    min_camera_period_s: f64,
     cameras: BTreeMap<String, Camera>,
     /// Topics whose first stamps make `start`: cameras, arms, grippers.
     streams: BTreeSet<String>,
     first: BTreeMap<String, u64>,
-    /// The latest first stamp seen: `start` is at least this.
+    /// The latest first stamp seen: the first tick is at least this.
     lower_ns: u64,
+    /// The first tick, once every stream has started.
     start_ns: Option<u64>,
 }
 
@@ -96,7 +99,13 @@ impl Selector {
         }
         let mut streams = BTreeSet::new();
         let mut cameras = BTreeMap::new();
+        // As `Stream::new` makes a camera's period from the rig's rate, so ticks match exactly.
+        let mut min_camera_period_s = f64::INFINITY;
         for c in &rig.cameras {
+            if c.fps.is_nan() || c.fps <= 0.0 {
+                return State::Off;
+            }
+            min_camera_period_s = min_camera_period_s.min(1.0 / c.fps);
             streams.insert(c.topic.clone());
             cameras.insert(c.topic.clone(), Camera::default());
         }
@@ -109,6 +118,7 @@ impl Selector {
         State::On(Box::new(Plan {
             use_log_time: opts.use_log_time,
             period_ns: 1e9 / fps,
+            min_camera_period_s,
             cameras,
             streams,
             first: BTreeMap::new(),
@@ -149,7 +159,17 @@ impl Selector {
             plan.first.insert(topic.topic.clone(), stamp_ns);
             plan.lower_ns = plan.lower_ns.max(stamp_ns);
             if plan.first.len() == plan.streams.len() {
-                plan.start_ns = Some(plan.lower_ns);
+                let latest_camera_first = plan
+                    .cameras
+                    .keys()
+                    .filter_map(|c| plan.first.get(c).copied())
+                    .max();
+                plan.start_ns = Some(first_tick(
+                    plan.lower_ns,
+                    latest_camera_first,
+                    plan.min_camera_period_s,
+                    plan.period_ns,
+                ));
                 plan.release_held(out);
             }
         }

@@ -142,7 +142,12 @@ fn useful(t: &TopicInfo) -> bool {
 }
 
 /// Converts `path` with `opts`, the first read guessing frames for `guess` (None: no guess).
-fn episode(path: &Path, guess: Option<&ConvertOptions>, opts: &ConvertOptions) -> (Episode, usize) {
+/// Returns the episode, the frames encoded ahead and the frames read again.
+fn episode(
+    path: &Path,
+    guess: Option<&ConvertOptions>,
+    opts: &ConvertOptions,
+) -> (Episode, usize, usize) {
     let (rec, frames) = read_mcap_light(path, &useful, guess).unwrap();
     let ahead = frames.prefetched();
     assert_eq!(
@@ -151,7 +156,8 @@ fn episode(path: &Path, guess: Option<&ConvertOptions>, opts: &ConvertOptions) -
             .len(),
         75
     );
-    (convert(path, &rec, &frames, opts).unwrap(), ahead)
+    let ep = convert(path, &rec, &frames, opts).unwrap();
+    (ep, ahead, frames.read_again())
 }
 
 fn same(a: &Episode, b: &Episode) {
@@ -183,13 +189,17 @@ fn frames_picked_during_the_read_equal_frames_read_again() {
         max_invalid_fraction: 0.2,
         ..ConvertOptions::default()
     };
-    let (reference, none_ahead) = episode(&path, None, &opts);
+    let (reference, none_ahead, all_again) = episode(&path, None, &opts);
     assert_eq!(none_ahead, 0);
     assert!(reference.len() > 15, "{} frames", reference.len());
+    // Without a guess every frame used comes from the second read.
+    assert!((reference.len()..=2 * reference.len()).contains(&all_again));
 
-    // The guess: every frame used, a few more at most.
-    let (guessed, ahead) = episode(&path, Some(&opts), &opts);
+    // The guess: every frame used, a few more at most, and none read again (the guess predicts
+    // alignment's ticks exactly).
+    let (guessed, ahead, again) = episode(&path, Some(&opts), &opts);
     same(&guessed, &reference);
+    assert_eq!(again, 0, "frames the guess missed");
     let used = 2 * reference.len();
     assert!(
         ahead >= reference.cameras[0].jpeg.len(),
@@ -214,8 +224,9 @@ fn frames_picked_during_the_read_equal_frames_read_again() {
         fps: Some(7.0),
         ..opts.clone()
     };
-    let (fixed, _) = episode(&path, Some(&wrong), &opts);
+    let (fixed, _, again) = episode(&path, Some(&wrong), &opts);
     same(&fixed, &reference);
+    assert!(again > 0);
 }
 
 /// Like [`episode`], guessing with `guess` (no rig given) and converting with `opts`.

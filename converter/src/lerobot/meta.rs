@@ -194,7 +194,7 @@ pub fn stage_all(
             "image_size": [s.image_size.0, s.image_size.1],
             "action": "absolute end-effector pose of the next tick (the last tick of each episode is dropped): per arm in rig order x, y, z (m), roll, pitch, yaw (rad, ROS R = Rz(yaw)·Ry(pitch)·Rx(roll), unwrapped along the episode), gripper opening (m); observation.state is the same at the current tick",
             "kinematics": "built-in DH models (fr3/panda: modified DH, pose of the Franka Hand TCP — flange + 0.1034 m along z, −45° about z — in fr3_link0; ur5/ur5e: standard DH, pose of tool0 in the DH base frame) unless the rig names a URDF chain or a TCP offset",
-            "time_alignment": "ticks at fps on header.stamp capture times, their phase chosen so synchronised cameras pick the same capture; latest camera frame at or before each tick; joints linearly interpolated",
+            "time_alignment": "ticks at fps on header.stamp capture times, starting a quarter frame period after the latest camera's first frame so synchronised cameras pick the same capture; latest camera frame at or before each tick; joints linearly interpolated",
             "sources": s.episodes.iter().map(|e| serde_json::json!({"episode_index": e.episode_index, "source": e.source, "blake3": e.source_hash})).collect::<Vec<_>>(),
         },
     });
