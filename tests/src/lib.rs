@@ -102,19 +102,24 @@ pub fn small_bimanual() -> scaledp_schema::Rig {
     rig
 }
 
+/// The record batches of a dataset's first data file.
+fn first_data_file(dataset: &Path) -> Vec<arrow_array::RecordBatch> {
+    let file =
+        std::fs::File::open(dataset.join("data/chunk-000/file-000.parquet")).expect("a data file");
+    parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .expect("parquet")
+        .build()
+        .expect("reader")
+        .map(|b| b.expect("a batch"))
+        .collect()
+}
+
 /// Every row of a float32 list column (`observation.state`, `action`, ...) of a dataset's first
 /// data file.
 pub fn f32_rows(dataset: &Path, column: &str) -> Vec<Vec<f32>> {
     use arrow_array::{Array, FixedSizeListArray, Float32Array};
-    let file =
-        std::fs::File::open(dataset.join("data/chunk-000/file-000.parquet")).expect("a data file");
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .expect("parquet")
-        .build()
-        .expect("reader");
     let mut rows = Vec::new();
-    for batch in reader {
-        let batch = batch.expect("a batch");
+    for batch in first_data_file(dataset) {
         let a = batch
             .column_by_name(column)
             .unwrap_or_else(|| panic!("no column {column}"))
@@ -197,4 +202,61 @@ pub fn numbered_message(topic: &scaledp_schema::rig::TopicSpec, k: u64) -> Vec<u
         }
         .to_cdr()
     }
+}
+
+/// Runs `tests/py/make_bags.py DIR` (ROS 1 and rosbag2 fixtures written by `rosbags`).
+pub fn make_bags(dir: &Path) {
+    let out = Command::new(python())
+        .arg(workspace().join("tests/py/make_bags.py"))
+        .arg(dir)
+        .output()
+        .unwrap_or_else(|e| panic!("running make_bags.py: {e}"));
+    assert!(
+        out.status.success(),
+        "make_bags.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Runs `scaledp convert ARGS -q`, asserts it succeeded with `converted` ("1 converted", ...) in
+/// its summary, and returns its stdout.
+pub fn convert_ok(args: &[&std::ffi::OsStr], converted: &str) -> String {
+    let out = convert_cli(args);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success() && stdout.contains(converted),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+/// Every value of a float32 scalar column (`timestamp`, ...) of a dataset's first data file.
+pub fn f32_column(dataset: &Path, column: &str) -> Vec<f32> {
+    use arrow_array::{Array, Float32Array};
+    let mut out = Vec::new();
+    for batch in first_data_file(dataset) {
+        let a = batch
+            .column_by_name(column)
+            .unwrap_or_else(|| panic!("no column {column}"));
+        let a = a.as_any().downcast_ref::<Float32Array>().expect("float32");
+        out.extend((0..a.len()).map(|i| a.value(i)));
+    }
+    out
+}
+
+/// The `scaledp.episode` metadata record of a recorded episode.
+pub fn episode_metadata(path: &Path) -> std::collections::BTreeMap<String, String> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let summary = mcap::Summary::read(&bytes)
+        .expect("an MCAP file")
+        .expect("a summary section");
+    let idx = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "scaledp.episode")
+        .expect("scaledp.episode");
+    mcap::read::metadata(&bytes, idx)
+        .expect("a metadata record")
+        .metadata
 }

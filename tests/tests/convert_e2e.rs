@@ -11,24 +11,15 @@ use scaledp::sim::synth::write_episode;
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{
-    check_dataset, convert_cli, f32_rows, python, scaledp_bin, small_bimanual, small_franka,
-    synth_episode, workspace, write_rig_file, T0,
+    check_dataset, convert_cli, f32_rows, make_bags, scaledp_bin, small_bimanual, small_franka,
+    synth_episode, write_rig_file, T0,
 };
 
 #[test]
 fn every_input_format_converts_into_one_lerobot_dataset() {
     let dir = tempfile::tempdir().unwrap();
     let bags = dir.path().join("bags");
-    let out = Command::new(python())
-        .arg(workspace().join("tests/py/make_bags.py"))
-        .arg(&bags)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    make_bags(&bags);
     let rig = small_franka();
     synth_episode(&bags.join("episode_000000.mcap"), &rig, 1, 3.0);
     let ds = dir.path().join("ds");

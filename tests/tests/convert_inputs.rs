@@ -6,32 +6,14 @@
 
 use std::f64::consts::{PI, TAU};
 use std::path::Path;
-use std::process::Command;
 
 use scaledp_schema::msg::JointState;
 use scaledp_schema::rig::{CameraModel, GripperModel};
 use scaledp_schema::{Rig, RobotModel, RosMessage};
 use scaledp_tests::{
-    check_dataset, convert_cli, f32_rows, python, run_python, small_bimanual, workspace, T0,
+    check_dataset, convert_cli, convert_ok, f32_column, f32_rows, make_bags, run_python,
+    small_bimanual, T0,
 };
-
-/// Every value of a float32 scalar column (`timestamp`) of a dataset's first data file.
-fn f32_column(ds: &Path, column: &str) -> Vec<f32> {
-    use arrow_array::{Array, Float32Array};
-    let file = std::fs::File::open(ds.join("data/chunk-000/file-000.parquet")).unwrap();
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut out = Vec::new();
-    for batch in reader {
-        let batch = batch.unwrap();
-        let a = batch.column_by_name(column).unwrap();
-        let a = a.as_any().downcast_ref::<Float32Array>().unwrap();
-        out.extend((0..a.len()).map(|i| a.value(i)));
-    }
-    out
-}
 
 /// The rig `info.json` records (its `scaledp.rig` TOML).
 fn recorded_rig(ds: &Path) -> Rig {
@@ -109,18 +91,15 @@ fn a_foreign_ur_bag_with_compressed_cameras_converts_without_a_rig() {
     let expected = run_python("make_foreign_bags.py", &[&bags]);
     let ds = dir.path().join("ds");
     let bag = bags.join("ur_compressed");
-    let out = convert_cli(&[
-        bag.as_os_str(),
-        "--task".as_ref(),
-        "fold the towel".as_ref(),
-        "--out".as_ref(),
-        ds.as_os_str(),
-    ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && stdout.contains("1 converted"),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    convert_ok(
+        &[
+            bag.as_os_str(),
+            "--task".as_ref(),
+            "fold the towel".as_ref(),
+            "--out".as_ref(),
+            ds.as_os_str(),
+        ],
+        "1 converted",
     );
     let v = check_dataset(&ds);
 
@@ -259,30 +238,18 @@ fn a_foreign_ur_bag_with_compressed_cameras_converts_without_a_rig() {
 fn a_franka_ros1_bag_without_a_rig_is_detected_as_fr3_with_its_hand() {
     let dir = tempfile::tempdir().unwrap();
     let bags = dir.path().join("bags");
-    let out = Command::new(python())
-        .arg(workspace().join("tests/py/make_bags.py"))
-        .arg(&bags)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    make_bags(&bags);
     let ds = dir.path().join("ds");
     let bag = bags.join("franka_ros1_bz2.bag");
-    let out = convert_cli(&[
-        bag.as_os_str(),
-        "--task".as_ref(),
-        "t".as_ref(),
-        "--out".as_ref(),
-        ds.as_os_str(),
-    ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && stdout.contains("1 converted"),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    convert_ok(
+        &[
+            bag.as_os_str(),
+            "--task".as_ref(),
+            "t".as_ref(),
+            "--out".as_ref(),
+            ds.as_os_str(),
+        ],
+        "1 converted",
     );
     let v = check_dataset(&ds);
     let rig = recorded_rig(&ds);

@@ -12,8 +12,8 @@ use std::sync::Arc;
 use scaledp_schema::msg::{Header, Point, Pose, PoseStamped, Quaternion, Time};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{
-    check_dataset, convert_cli, f32_rows, read_json, run_python, small_franka, synth_episode,
-    workspace, T0,
+    check_dataset, convert_cli, convert_ok, f32_column, f32_rows, read_json, run_python,
+    small_franka, synth_episode, workspace, T0,
 };
 
 /// Copies the MCAP `src` to `dst`: its metadata and every message `keep(topic, index in topic)`
@@ -52,19 +52,22 @@ fn rewrite_mcap(
         message_encoding: "cdr".into(),
         metadata: BTreeMap::new(),
     });
+    let write_extra = |w: &mut mcap::Writer<_>, i: usize, log: u64, data: &[u8]| {
+        w.write(&mcap::Message {
+            channel: channel.clone(),
+            sequence: i as u32,
+            log_time: log,
+            publish_time: log,
+            data: Cow::Borrowed(data),
+        })
+        .unwrap();
+    };
     let mut extra = extra.iter().enumerate().peekable();
     let mut counts: BTreeMap<String, u64> = BTreeMap::new();
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         while let Some((i, (log, data))) = extra.next_if(|(_, (log, _))| *log <= m.log_time) {
-            w.write(&mcap::Message {
-                channel: channel.clone(),
-                sequence: i as u32,
-                log_time: *log,
-                publish_time: *log,
-                data: Cow::Borrowed(data),
-            })
-            .unwrap();
+            write_extra(&mut w, i, *log, data);
         }
         let k = counts.entry(m.channel.topic.clone()).or_default();
         if keep(&m.channel.topic, *k) {
@@ -73,14 +76,7 @@ fn rewrite_mcap(
         *k += 1;
     }
     for (i, (log, data)) in extra {
-        w.write(&mcap::Message {
-            channel: channel.clone(),
-            sequence: i as u32,
-            log_time: *log,
-            publish_time: *log,
-            data: Cow::Borrowed(data),
-        })
-        .unwrap();
+        write_extra(&mut w, i, *log, data);
     }
     w.finish().unwrap();
 }
@@ -187,7 +183,10 @@ fn a_pose_stamped_command_topic_is_the_action_at_each_tick() {
         .collect();
     assert!(errors.is_empty(), "{errors:?}");
     assert_eq!(v["frames"].as_u64().unwrap() as usize, state.len());
-    let ts = timestamps(&ds);
+    let ts: Vec<f64> = f32_column(&ds, "timestamp")
+        .into_iter()
+        .map(f64::from)
+        .collect();
     // The command's angles are on the state's branch (within π of it at the first tick), so
     // action − state never carries a spurious turn; then they run on continuously.
     for d in 3..6 {
@@ -241,24 +240,6 @@ fn a_pose_stamped_command_topic_is_the_action_at_each_tick() {
         chosen.windows(2).all(|w| (4..=6).contains(&(w[1] - w[0]))),
         "{chosen:?}"
     );
-}
-
-/// The `timestamp` column of the first data file.
-fn timestamps(ds: &Path) -> Vec<f64> {
-    use arrow_array::{Array, Float32Array};
-    let file = std::fs::File::open(ds.join("data/chunk-000/file-000.parquet")).unwrap();
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut out = Vec::new();
-    for batch in reader {
-        let batch = batch.unwrap();
-        let a = batch.column_by_name("timestamp").unwrap();
-        let a = a.as_any().downcast_ref::<Float32Array>().unwrap();
-        out.extend((0..a.len()).map(|i| f64::from(a.value(i))));
-    }
-    out
 }
 
 /// A string, float64 or int64 column of the episodes table, as JSON values.
@@ -323,7 +304,7 @@ fn info_json_and_the_episodes_table_record_provenance_and_overwrite_starts_afres
         synth_episode(ep, &rig, i as u64 + 1, 2.0);
     }
     let ds = dir.path().join("ds");
-    let run = |inputs: &Path, extra: &[&str]| {
+    let run = |inputs: &Path, extra: &[&str], converted: &str| {
         let mut args = vec![
             inputs.as_os_str(),
             "--out".as_ref(),
@@ -334,16 +315,9 @@ fn info_json_and_the_episodes_table_record_provenance_and_overwrite_starts_afres
             "1".as_ref(),
         ];
         args.extend(extra.iter().map(std::ffi::OsStr::new));
-        let out = convert_cli(&args);
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(
-            out.status.success(),
-            "{stdout}{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        stdout
+        convert_ok(&args, converted)
     };
-    assert!(run(&inp, &[]).contains("2 converted"));
+    run(&inp, &[], "2 converted");
     let v = check_dataset(&ds);
     assert_eq!(v["episodes"], 2);
 
@@ -403,8 +377,8 @@ fn info_json_and_the_episodes_table_record_provenance_and_overwrite_starts_afres
 
     // Again: both inputs are skipped by content. With --overwrite on the second alone, the
     // dataset is rebuilt holding just that one.
-    assert!(run(&inp, &[]).contains("0 converted"));
-    assert!(run(&eps[1], &["--overwrite"]).contains("1 converted"));
+    run(&inp, &[], "0 converted");
+    run(&eps[1], &["--overwrite"], "1 converted");
     let v = check_dataset(&ds);
     assert_eq!(v["episodes"], 1);
     let info = read_json(&ds.join("meta/info.json"));

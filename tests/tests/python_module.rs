@@ -12,7 +12,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use scaledp_datasets::{Batch, LoaderOptions, Norm, Split};
-use scaledp_tests::{f32_rows, python, scaledp_bin, small_franka, synth_episode, workspace};
+use scaledp_tests::{
+    convert_ok, f32_rows, python, small_franka, synth_episode, workspace, write_rig_file,
+};
 use serde_json::{json, Value};
 
 /// Four episodes of different lengths, two 64×48 cameras.
@@ -24,23 +26,17 @@ fn dataset(dir: &Path) -> PathBuf {
         std::fs::create_dir_all(&bags).unwrap();
         synth_episode(&path, &rig, seed, seconds);
     }
-    let rig_path = dir.join("rig.toml");
-    std::fs::write(&rig_path, toml::to_string(&rig).unwrap()).unwrap();
+    let rig_path = write_rig_file(dir, &rig);
     let ds = dir.join("ds");
-    let out = Command::new(scaledp_bin())
-        .arg("convert")
-        .arg(&bags)
-        .arg("--rig")
-        .arg(&rig_path)
-        .arg("--out")
-        .arg(&ds)
-        .arg("-q")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    convert_ok(
+        &[
+            bags.as_os_str(),
+            "--rig".as_ref(),
+            rig_path.as_os_str(),
+            "--out".as_ref(),
+            ds.as_os_str(),
+        ],
+        "converted",
     );
     ds
 }

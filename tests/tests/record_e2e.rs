@@ -14,7 +14,7 @@ use scaledp_recorder::{
 };
 use scaledp_schema::msg::{header_stamp, Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
-use scaledp_tests::{free_endpoint, run_python, small_bimanual, small_franka};
+use scaledp_tests::{episode_metadata, free_endpoint, run_python, small_bimanual, small_franka};
 use sha2::{Digest, Sha256};
 
 type Published = Arc<Mutex<HashMap<String, Vec<Vec<u8>>>>>;
@@ -315,19 +315,6 @@ fn rmw_zenoh_keys_are_recorded_too() {
     );
     let img = Image::from_cdr(&recorded["/cam_high/camera/color/image_raw"][0].0).unwrap();
     assert_eq!(img.encoding, "rgb8");
-}
-
-fn episode_metadata(path: &Path) -> BTreeMap<String, String> {
-    let bytes = std::fs::read(path).unwrap();
-    let summary = mcap::Summary::read(&bytes)
-        .unwrap()
-        .expect("a summary section");
-    let idx = summary
-        .metadata_indexes
-        .iter()
-        .find(|m| m.name == "scaledp.episode")
-        .expect("scaledp.episode");
-    mcap::read::metadata(&bytes, idx).unwrap().metadata
 }
 
 #[test]

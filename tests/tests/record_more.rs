@@ -9,8 +9,10 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use scaledp_recorder::net;
+use scaledp_schema::rig::TopicSpec;
 use scaledp_tests::{
-    free_endpoint, numbered_message, python, scaledp_bin, small_franka, workspace, write_rig_file,
+    episode_metadata, free_endpoint, numbered_message, python, scaledp_bin, small_franka,
+    workspace, write_rig_file,
 };
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
@@ -42,6 +44,61 @@ fn wait_status(rx: &mpsc::Receiver<serde_json::Value>, event: &str) -> serde_jso
     }
 }
 
+/// The test's side of the link: a Zenoh session listening on a free loopback endpoint, the
+/// recorder's status events under `prefix` as they arrive, and a blocking publisher per topic
+/// (on the keys zenoh-bridge-ros2dds uses).
+struct Feed {
+    endpoint: String,
+    session: zenoh::Session,
+    statuses: mpsc::Receiver<serde_json::Value>,
+    publishers: Vec<zenoh::pubsub::Publisher<'static>>,
+    _sub: zenoh::pubsub::Subscriber<()>,
+}
+
+impl Feed {
+    fn open(prefix: &str, topics: &[TopicSpec]) -> Self {
+        let endpoint = free_endpoint();
+        let session =
+            net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap())
+                .unwrap();
+        let (tx, statuses) = mpsc::channel::<serde_json::Value>();
+        let _sub = session
+            .declare_subscriber(format!("{prefix}/status"))
+            .callback(move |s| {
+                let _ = tx.send(serde_json::from_slice(&s.payload().to_bytes()).unwrap());
+            })
+            .wait()
+            .unwrap();
+        let publishers = topics
+            .iter()
+            .map(|t| {
+                session
+                    .declare_publisher(scaledp_recorder::keys::bridge_key("", &t.topic))
+                    .congestion_control(CongestionControl::Block)
+                    .wait()
+                    .unwrap()
+            })
+            .collect();
+        Self {
+            endpoint,
+            session,
+            statuses,
+            publishers,
+            _sub,
+        }
+    }
+}
+
+/// Messages per topic in an MCAP file.
+fn messages_per_topic(path: &std::path::Path) -> BTreeMap<String, u64> {
+    let bytes = std::fs::read(path).unwrap();
+    let mut n: BTreeMap<String, u64> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        *n.entry(m.unwrap().channel.topic.clone()).or_default() += 1;
+    }
+    n
+}
+
 /// `--queue-mib 0` leaves a one-message queue; a burst on every topic overflows it. The
 /// episode's line on stdout, the session summary on stderr, the exit status (3: data lost), the
 /// status key and the file's metadata all report the same drops, and per topic the file holds
@@ -53,18 +110,14 @@ fn record_command_reports_queue_drops_and_exits_3() {
     let dir = tempfile::tempdir().unwrap();
     let rig_path = write_rig_file(dir.path(), &rig);
     let out = dir.path().join("rec");
-    let endpoint = free_endpoint();
     let prefix = format!("test/cli_drops{}", std::process::id());
-    let session =
-        net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap()).unwrap();
-    let (tx, statuses) = mpsc::channel::<serde_json::Value>();
-    let _sub = session
-        .declare_subscriber(format!("{prefix}/status"))
-        .callback(move |s| {
-            let _ = tx.send(serde_json::from_slice(&s.payload().to_bytes()).unwrap());
-        })
-        .wait()
-        .unwrap();
+    let Feed {
+        endpoint,
+        session,
+        statuses,
+        publishers,
+        _sub,
+    } = Feed::open(&prefix, &topics);
     let mut child = Reap(Some(
         Command::new(scaledp_bin())
             .args([
@@ -117,16 +170,6 @@ fn record_command_reports_queue_drops_and_exits_3() {
     };
     assert_eq!(started["episode"], 0);
 
-    let publishers: Vec<_> = topics
-        .iter()
-        .map(|t| {
-            session
-                .declare_publisher(scaledp_recorder::keys::bridge_key("", &t.topic))
-                .congestion_control(CongestionControl::Block)
-                .wait()
-                .unwrap()
-        })
-        .collect();
     let per_topic = 300;
     for k in 0..per_topic {
         for (t, p) in topics.iter().zip(&publishers) {
@@ -152,24 +195,14 @@ fn record_command_reports_queue_drops_and_exits_3() {
     assert_eq!(status.code(), Some(3), "exit status; stderr: {stderr}");
 
     let path = out.join("episode_000000.mcap");
-    let bytes = std::fs::read(&path).unwrap();
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    let idx = summary
-        .metadata_indexes
-        .iter()
-        .find(|m| m.name == "scaledp.episode")
-        .unwrap();
-    let meta = mcap::read::metadata(&bytes, idx).unwrap().metadata;
+    let meta = episode_metadata(&path);
     assert_eq!(meta["outcome"], "success");
     assert_eq!(meta["operator"], "tester");
     let dropped: BTreeMap<String, u64> = serde_json::from_str(&meta["dropped"]).unwrap();
     let counts: BTreeMap<String, u64> = serde_json::from_str(&meta["message_counts"]).unwrap();
     assert_eq!(finished["dropped"], serde_json::to_value(&dropped).unwrap());
     assert_eq!(finished["messages"], serde_json::to_value(&counts).unwrap());
-    let mut in_file: BTreeMap<String, u64> = BTreeMap::new();
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        *in_file.entry(m.unwrap().channel.topic.clone()).or_default() += 1;
-    }
+    let in_file = messages_per_topic(&path);
     for t in &topics {
         let (written, lost) = (counts[&t.topic], dropped[&t.topic]);
         assert_eq!(written + lost, per_topic, "{}: written + dropped", t.topic);
@@ -206,28 +239,14 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
     let dir = tempfile::tempdir().unwrap();
     let rig_path = write_rig_file(dir.path(), &rig);
     let out = dir.path().join("rec");
-    let endpoint = free_endpoint();
     let prefix = format!("test/keys{}", std::process::id());
-    let session =
-        net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap()).unwrap();
-    let (tx, statuses) = mpsc::channel::<serde_json::Value>();
-    let _sub = session
-        .declare_subscriber(format!("{prefix}/status"))
-        .callback(move |s| {
-            let _ = tx.send(serde_json::from_slice(&s.payload().to_bytes()).unwrap());
-        })
-        .wait()
-        .unwrap();
-    let publishers: Vec<_> = topics
-        .iter()
-        .map(|t| {
-            session
-                .declare_publisher(scaledp_recorder::keys::bridge_key("", &t.topic))
-                .congestion_control(CongestionControl::Block)
-                .wait()
-                .unwrap()
-        })
-        .collect();
+    let Feed {
+        endpoint,
+        session: _session,
+        statuses,
+        publishers,
+        _sub,
+    } = Feed::open(&prefix, &topics);
     let mut driver = Reap(Some(
         Command::new(python())
             .arg(workspace().join("tests/py/pty_keys.py"))
@@ -308,23 +327,13 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
     assert!(!out.join("episode_000001.mcap").exists());
 
     // The kept file: its metadata and every message the status reported.
-    let bytes = std::fs::read(&kept_path).unwrap();
-    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
-    let idx = summary
-        .metadata_indexes
-        .iter()
-        .find(|m| m.name == "scaledp.episode")
-        .unwrap();
-    let meta = mcap::read::metadata(&bytes, idx).unwrap().metadata;
+    let meta = episode_metadata(&kept_path);
     assert_eq!(meta["outcome"], "success");
     assert_eq!(meta["operator"], "kb");
     assert_eq!(meta["task"], "keys");
     let counts: BTreeMap<String, u64> = serde_json::from_str(&meta["message_counts"]).unwrap();
     assert_eq!(kept["messages"], serde_json::to_value(&counts).unwrap());
-    let mut in_file: BTreeMap<String, u64> = BTreeMap::new();
-    for m in mcap::MessageStream::new(&bytes).unwrap() {
-        *in_file.entry(m.unwrap().channel.topic.clone()).or_default() += 1;
-    }
+    let in_file = messages_per_topic(&kept_path);
     for t in &topics {
         // Keys and data travel different paths, so a message put just before `y` may land
         // after the stop; each topic holds some and at most what was sent.
