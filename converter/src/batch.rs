@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 
 use rayon::prelude::*;
+use scaledp_schema::Label;
 
 use crate::episode::{convert, ConvertOptions, Episode};
 use crate::error::{Error, Result};
@@ -272,7 +273,7 @@ fn is_mcap_file(path: &Path) -> bool {
 fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option<String>) {
     let failed = |e: Error| Outcome::Failed(e.to_string());
     let run = |rec: &Recording, frames: &dyn FrameStore| -> Converted {
-        check_outcome(rec, opts)?;
+        check_outcome(path, rec, opts)?;
         let parts = windows(rec, frames, opts.split_gap_s);
         let split = parts.len() > 1;
         let mut episodes = Vec::with_capacity(parts.len());
@@ -331,13 +332,19 @@ fn guarded(
 }
 
 /// Skips episodes the operator marked as discarded or failed.
-fn check_outcome(rec: &Recording, opts: &JobOptions) -> std::result::Result<(), Outcome> {
-    let outcome = ["scaledp.episode", "scaledp.episode.start"]
-        .iter()
-        .find_map(|n| rec.metadata.get(*n).and_then(|m| m.get("outcome")).cloned());
-    match outcome.as_deref() {
-        Some("discarded") => return Err(Outcome::Skipped("recorded outcome: discarded".into())),
-        Some("failure") if !opts.include_failures => {
+fn check_outcome(
+    path: &Path,
+    rec: &Recording,
+    opts: &JobOptions,
+) -> std::result::Result<(), Outcome> {
+    let label = crate::detect::episode_metadata(path, rec)
+        .map_err(|e| Outcome::Failed(e.to_string()))?
+        .and_then(|m| m.label);
+    match label {
+        Some(Label::Discarded) => {
+            return Err(Outcome::Skipped("recorded outcome: discarded".into()))
+        }
+        Some(Label::Failure) if !opts.include_failures => {
             return Err(Outcome::Skipped(
                 "recorded outcome: failure (see --include-failures)".into(),
             ))

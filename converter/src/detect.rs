@@ -4,35 +4,34 @@
 use std::path::Path;
 
 use scaledp_schema::rig::{Arm, Camera, CameraModel, Gripper, GripperModel, Rig};
-use scaledp_schema::RobotModel;
+use scaledp_schema::{EpisodeMetadata, RobotModel};
 
 use crate::align::median_interval_s;
 use crate::error::{Error, Result};
 use crate::source::Recording;
 
-/// The rig stored by `scaledp record` in `scaledp.episode` (or `.start`) metadata, if any.
+/// The episode metadata our recorder (or the simulator) stored, if any.
+pub fn episode_metadata(path: &Path, rec: &Recording) -> Result<Option<EpisodeMetadata>> {
+    EpisodeMetadata::from_records(&rec.metadata)
+        .transpose()
+        .map_err(|e| Error::input(path, e.to_string()))
+}
+
+/// The rig stored by `scaledp record` in its episode metadata, if any.
 pub fn from_metadata(path: &Path, rec: &Recording) -> Result<Option<Rig>> {
-    for name in ["scaledp.episode", "scaledp.episode.start"] {
-        if let Some(text) = rec.metadata.get(name).and_then(|m| m.get("rig")) {
-            return Rig::parse(text, path)
-                .map(Some)
-                .map_err(|e| Error::input(path, format!("stored rig: {e}")));
-        }
+    match episode_metadata(path, rec)?.and_then(|m| m.rig_toml) {
+        Some(text) => Rig::parse(&text, path)
+            .map(Some)
+            .map_err(|e| Error::input(path, format!("stored rig: {e}"))),
+        None => Ok(None),
     }
-    Ok(None)
 }
 
 /// The task stored by `scaledp record`, if any.
-pub fn task_from_metadata(rec: &Recording) -> Option<String> {
-    ["scaledp.episode", "scaledp.episode.start"]
-        .iter()
-        .find_map(|n| {
-            rec.metadata
-                .get(*n)
-                .and_then(|m| m.get("task"))
-                .filter(|t| !t.is_empty())
-                .cloned()
-        })
+pub fn task_from_metadata(path: &Path, rec: &Recording) -> Result<Option<String>> {
+    Ok(episode_metadata(path, rec)?
+        .map(|m| m.task)
+        .filter(|t| !t.is_empty()))
 }
 
 /// Applies `--topic NAME=TOPIC` overrides to a rig; an unknown name is an error.

@@ -344,7 +344,7 @@ pub fn convert(
     };
     crate::detect::override_topics(path, &mut rig, &opts.topic_overrides)?;
     let fps = opts.fps.unwrap_or(rig.control_rate_hz);
-    let task = crate::detect::task_from_metadata(rec)
+    let task = crate::detect::task_from_metadata(path, rec)?
         .or_else(|| opts.task.clone())
         .ok_or_else(|| Error::Rejected {
             path: path.into(),

@@ -46,7 +46,7 @@ fn record(path: &Path, rig: &Rig) {
         .unwrap();
     let grip_ch = w.add_channel(joints, &grip.topic, "cdr", &none).unwrap();
     w.write_metadata(&mcap::records::Metadata {
-        name: "scaledp.episode.start".into(),
+        name: scaledp_schema::episode::START_RECORD.into(),
         metadata: BTreeMap::from([
             ("rig".to_string(), toml::to_string(rig).unwrap()),
             ("task".to_string(), "stack the cubes".to_string()),

@@ -114,7 +114,7 @@ impl EpisodeOptions {
         }
         writer
             .write_metadata(&mcap::records::Metadata {
-                name: "scaledp.episode.start".into(),
+                name: scaledp_schema::episode::START_RECORD.into(),
                 metadata: start_metadata,
             })
             .map_err(Error::mcap(&partial))?;
@@ -209,7 +209,7 @@ impl EpisodeWriter {
         let mut w = self.writer.take().ok_or(Error::Stopped)?;
         let partial = self.partial.clone();
         w.write_metadata(&mcap::records::Metadata {
-            name: "scaledp.episode".into(),
+            name: scaledp_schema::episode::END_RECORD.into(),
             metadata,
         })
         .map_err(Error::mcap(&partial))?;

@@ -4,13 +4,13 @@
 //!
 //! ```no_run
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! use scaledp_recorder::{net, Command, Outcome, RecorderOptions};
+//! use scaledp_recorder::{net, Command, Label, RecorderOptions};
 //! let rig = scaledp_schema::Rig::builtin("franka_2zed").expect("shipped rig");
 //! let config = net::zenoh_config(None, &[], &[])?;
 //! let recorder = RecorderOptions::new(rig, "demos").task("stack the cups").start(config)?;
 //! recorder.send(Command::Start);
 //! std::thread::sleep(std::time::Duration::from_secs(10));
-//! recorder.send(Command::Stop(Outcome::Success));
+//! recorder.send(Command::Stop(Label::Success));
 //! recorder.finish()?;
 //! # Ok(()) }
 //! ```
@@ -29,7 +29,7 @@ mod recover;
 mod session;
 mod writer;
 
-pub use control::{Command, Outcome};
+pub use control::{Command, Label};
 pub use episode::{
     partial_path, Compression, EpisodeOptions, EpisodeSummary, EpisodeWriter, OFFERED_QOS_YAML,
 };

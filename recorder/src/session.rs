@@ -18,7 +18,7 @@ use zenoh::bytes::ZBytes;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
-use crate::control::{Command, Outcome};
+use crate::control::{Command, Label};
 use crate::episode::{Compression, EpisodeOptions, EpisodeSummary};
 use crate::error::{Error, Result};
 use crate::keys::{bridge_key, rmw_key_expr, RmwAttachment};
@@ -329,7 +329,7 @@ pub struct EpisodeReport {
     /// Episode index.
     pub index: u64,
     /// How it ended.
-    pub outcome: Outcome,
+    pub outcome: Label,
     /// Duration from start to stop (s).
     pub duration_s: f64,
     /// Files, messages and bytes.

@@ -5,13 +5,15 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::Arc;
-use std::time::{Instant, SystemTime};
+use std::time::Instant;
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use scaledp_schema::rig::TopicSpec;
 use zenoh::Wait;
 
-use crate::control::{Command, Outcome};
+use crate::control::{Command, Label};
+use scaledp_schema::EpisodeMetadata;
+
 use crate::episode::EpisodeWriter;
 use crate::error::{Error, Result};
 use crate::session::{now_ns, EpisodeReport, Event, Item, RecorderOptions, Shared};
@@ -20,7 +22,7 @@ struct Active {
     index: u64,
     writer: EpisodeWriter,
     started: Instant,
-    start_meta: BTreeMap<String, String>,
+    start_meta: EpisodeMetadata,
     dropped_at_start: Vec<u64>,
     gaps_at_start: Vec<u64>,
 }
@@ -59,11 +61,6 @@ fn next_free_index(dir: &Path) -> u64 {
 /// `episode_000042.mcap`.
 pub fn episode_file_name(index: u64) -> String {
     format!("episode_{index:06}.mcap")
-}
-
-fn rfc3339(ns: u64) -> String {
-    humantime::format_rfc3339_millis(SystemTime::UNIX_EPOCH + std::time::Duration::from_nanos(ns))
-        .to_string()
 }
 
 impl WriterThread {
@@ -113,7 +110,7 @@ impl WriterThread {
                     }
                 }
                 Ok(Item::Command(Command::Quit)) | Err(RecvTimeoutError::Disconnected) => {
-                    self.stop(Outcome::Unlabeled);
+                    self.stop(Label::Unlabeled);
                     break;
                 }
                 Ok(Item::Command(cmd)) => self.handle(cmd),
@@ -132,7 +129,7 @@ impl WriterThread {
         match (cmd, self.active.is_some()) {
             (Command::Start | Command::Toggle, false) => self.start(),
             (Command::Stop(outcome), true) => self.stop(outcome),
-            (Command::Toggle, true) => self.stop(Outcome::Unlabeled),
+            (Command::Toggle, true) => self.stop(Label::Unlabeled),
             (cmd, open) => tracing::debug!(?cmd, open, "command ignored in this state"),
         }
     }
@@ -146,21 +143,20 @@ impl WriterThread {
         self.next_index += 1;
         let path = self.opts.out_dir.join(episode_file_name(index));
         let started_ns = now_ns();
-        let rig_toml = toml::to_string(&self.opts.rig).unwrap_or_default();
-        let start_meta = BTreeMap::from([
-            ("episode_index".to_string(), index.to_string()),
-            ("task".into(), self.opts.task.clone()),
-            ("operator".into(), self.opts.operator.clone()),
-            ("rig_name".into(), self.opts.rig.name.clone()),
-            ("rig".into(), rig_toml),
-            ("start_time_ns".into(), started_ns.to_string()),
-            ("start_time".into(), rfc3339(started_ns)),
-            ("recorder_version".into(), env!("CARGO_PKG_VERSION").into()),
-        ]);
+        let start_meta = EpisodeMetadata {
+            episode_index: Some(index),
+            task: self.opts.task.clone(),
+            operator: self.opts.operator.clone(),
+            rig_name: self.opts.rig.name.clone(),
+            rig_toml: toml::to_string(&self.opts.rig).ok(),
+            start_time_ns: Some(started_ns),
+            recorder_version: Some(env!("CARGO_PKG_VERSION").into()),
+            ..EpisodeMetadata::default()
+        };
         match self
             .opts
             .episode
-            .create(&path, &self.topics, start_meta.clone())
+            .create(&path, &self.topics, start_meta.start_record())
         {
             Ok(writer) => {
                 let partial = writer.partial_path().to_path_buf();
@@ -193,7 +189,7 @@ impl WriterThread {
         }
     }
 
-    fn stop(&mut self, outcome: Outcome) {
+    fn stop(&mut self, outcome: Label) {
         let Some(active) = self.active.take() else {
             return;
         };
@@ -224,26 +220,20 @@ impl WriterThread {
             .zip(active.writer.message_counts())
             .map(|(t, n)| (t.topic.as_str(), *n))
             .collect();
-        let mut meta = active.start_meta.clone();
-        meta.extend([
-            ("end_time_ns".to_string(), end_ns.to_string()),
-            ("end_time".into(), rfc3339(end_ns)),
-            ("duration_s".into(), format!("{duration_s:.3}")),
-            ("outcome".into(), outcome.as_str().into()),
-            (
-                "message_counts".into(),
-                serde_json::to_string(&counts).unwrap_or_default(),
-            ),
-            (
-                "dropped".into(),
-                serde_json::to_string(&dropped).unwrap_or_default(),
-            ),
-            (
-                "upstream_gaps".into(),
-                serde_json::to_string(&gaps).unwrap_or_default(),
-            ),
-        ]);
-        let dest: Option<PathBuf> = (outcome == Outcome::Discarded).then(|| {
+        let meta = EpisodeMetadata {
+            end_time_ns: Some(end_ns),
+            duration_s: Some(duration_s),
+            label: Some(outcome),
+            message_counts: counts
+                .iter()
+                .map(|(t, n)| (t.to_string(), *n))
+                .collect(),
+            dropped: dropped.clone(),
+            upstream_gaps: gaps.clone(),
+            ..active.start_meta.clone()
+        }
+        .end_record();
+        let dest: Option<PathBuf> = (outcome == Label::Discarded).then(|| {
             self.opts
                 .out_dir
                 .join("discarded")
@@ -307,15 +297,6 @@ impl WriterThread {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn times_are_rfc3339_utc_milliseconds() {
-        assert_eq!(rfc3339(0), "1970-01-01T00:00:00.000Z");
-        assert_eq!(
-            rfc3339(1_700_000_000_123_456_789),
-            "2023-11-14T22:13:20.123Z"
-        );
-    }
 
     #[test]
     fn numbering_continues_after_kept_partial_and_discarded_episodes() {

@@ -70,7 +70,7 @@ pub const T0: u64 = 1_700_000_000_000_000_000;
 /// A recorder-style episode of `rig` at `path`, rendered by the simulator (task "stack the
 /// cubes").
 pub fn synth_episode(path: &Path, rig: &scaledp_schema::Rig, seed: u64, seconds: f64) {
-    scaledp::sim::synth::write_episode(
+    scaledp_sim::synth::write_episode(
         path,
         rig,
         seed,
@@ -254,8 +254,8 @@ pub fn episode_metadata(path: &Path) -> std::collections::BTreeMap<String, Strin
     let idx = summary
         .metadata_indexes
         .iter()
-        .find(|m| m.name == "scaledp.episode")
-        .expect("scaledp.episode");
+        .find(|m| m.name == scaledp_schema::episode::END_RECORD)
+        .expect("an end-of-episode metadata record");
     mcap::read::metadata(&bytes, idx)
         .expect("a metadata record")
         .metadata

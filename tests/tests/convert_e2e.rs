@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use scaledp::sim::synth::write_episode;
+use scaledp_sim::synth::write_episode;
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{

@@ -324,7 +324,7 @@ fn a_yaw_sweeping_past_pi_is_unwrapped_in_state_and_action() {
             *payload = js.to_cdr();
         }
     };
-    scaledp::sim::synth::write_episode(&ep, &rig, 6, seconds, start, "sweep", &mut sweep).unwrap();
+    scaledp_sim::synth::write_episode(&ep, &rig, 6, seconds, start, "sweep", &mut sweep).unwrap();
     let ds = dir.path().join("ds");
     let out = convert_cli(&[ep.as_os_str(), "--out".as_ref(), ds.as_os_str()]);
     assert!(

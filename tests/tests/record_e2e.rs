@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use scaledp::sim::{KeyStyle, SimOptions};
+use scaledp_sim::{KeyStyle, SimOptions};
 use scaledp_recorder::{
-    net, now_ns, Command, EpisodeReport, Event, Outcome, Recorder, RecorderOptions,
+    net, now_ns, Command, EpisodeReport, Event, Label, Recorder, RecorderOptions,
 };
 use scaledp_schema::msg::{header_stamp, Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
@@ -86,7 +86,7 @@ fn record_one(rig: Rig, keys: KeyStyle, seconds: f64) -> Run {
     let before = now_ns();
     recorder.send(Command::Start);
     std::thread::sleep(Duration::from_secs_f64(seconds));
-    recorder.send(Command::Stop(Outcome::Success));
+    recorder.send(Command::Stop(Label::Success));
     let report = next_finished(&recorder);
     let after = now_ns();
     recorder.finish().unwrap();
@@ -365,14 +365,14 @@ fn zenoh_control_key_starts_stops_and_discards_episodes() {
     }
     recorder.finish().unwrap();
     sim.stop();
-    let want: [(PathBuf, Outcome); 4] = [
-        (dir.path().join("episode_000000.mcap"), Outcome::Unlabeled),
+    let want: [(PathBuf, Label); 4] = [
+        (dir.path().join("episode_000000.mcap"), Label::Unlabeled),
         (
             dir.path().join("discarded/episode_000001.mcap"),
-            Outcome::Discarded,
+            Label::Discarded,
         ),
-        (dir.path().join("episode_000002.mcap"), Outcome::Failure),
-        (dir.path().join("episode_000003.mcap"), Outcome::Success),
+        (dir.path().join("episode_000002.mcap"), Label::Failure),
+        (dir.path().join("episode_000003.mcap"), Label::Success),
     ];
     assert_eq!(paths.len(), want.len());
     for ((path, outcome), report) in want.iter().zip(&paths) {
@@ -483,7 +483,7 @@ fn queue_overflow_drops_are_counted_per_topic_and_reported() {
         assert!(Instant::now() < deadline, "{:?}", recorder.status().topics);
         std::thread::sleep(Duration::from_millis(10));
     }
-    recorder.send(Command::Stop(Outcome::Failure));
+    recorder.send(Command::Stop(Label::Failure));
     let report = next_finished(&recorder);
     let live = recorder.status().topics;
     let path = report.summary.path.clone();

@@ -1,12 +1,11 @@
-//! The `scaledp` command line and what it runs that belongs to no library: the simulated rig,
-//! the benchmarks, the demo, the interactive recorder front end.
+//! The `scaledp` command line and what it runs that belongs to no library: the benchmarks, the
+//! demo, the interactive recorder front end.
 //!
 //! Exit codes: 0 success; 1 error; 2 bad usage; 3 finished, but data was lost (dropped
 //! messages, failed episodes) — see [`cli::ExitStatus`].
 
 pub mod cli;
 mod commands;
-pub mod sim;
 mod ui;
 
 use clap::Parser;

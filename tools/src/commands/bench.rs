@@ -15,7 +15,7 @@ use scaledp_schema::Rig;
 use zenoh::Wait;
 
 use crate::cli::{BenchRecordArgs, CompressionArg, ExitStatus};
-use crate::sim::SimOptions;
+use scaledp_sim::SimOptions;
 
 const REFERENCE_RIG: &str = r#"
 name = "bench_reference"

@@ -228,7 +228,7 @@ pub(super) fn synthesize(
                 };
                 // Distinct start times, a minute apart.
                 let start_ns = 1_700_000_000_000_000_000 + i as u64 * 60_000_000_000;
-                let r = crate::sim::synth::write_episode(
+                let r = scaledp_sim::synth::write_episode(
                     path,
                     rig,
                     i as u64,

@@ -11,12 +11,12 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use scaledp_converter::{JobOptions, Outcome as Converted, Progress};
 use scaledp_datasets::LoaderOptions;
-use scaledp_recorder::{net, Outcome, RecorderOptions};
+use scaledp_recorder::{net, Label, RecorderOptions};
 use scaledp_schema::Rig;
 
 use super::record::{timed_episodes, wait_for_topics};
 use crate::cli::{DemoArgs, ExitStatus};
-use crate::sim::SimOptions;
+use scaledp_sim::SimOptions;
 use crate::ui::topic_labels;
 
 pub fn run(args: DemoArgs) -> Result<ExitStatus> {
@@ -45,7 +45,7 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
         &recorder,
         Some(args.episodes),
         args.duration,
-        Outcome::Success,
+        Label::Success,
         &stop,
         topic_labels(&rig),
     );

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use crossterm::event::{self, Event as TermEvent, KeyCode, KeyEvent, KeyModifiers};
-use scaledp_recorder::{Command, EpisodeReport, Event, Outcome, Recorder, RecorderOptions};
+use scaledp_recorder::{Command, EpisodeReport, Event, Label, Recorder, RecorderOptions};
 use scaledp_schema::Rig;
 
 use crate::cli::{ExitStatus, RecordArgs};
@@ -105,7 +105,7 @@ pub fn timed_episodes(
     recorder: &Recorder,
     episodes: Option<u64>,
     duration_s: f64,
-    outcome: Outcome,
+    outcome: Label,
     stop: &AtomicBool,
     labels: Vec<String>,
 ) -> Tally {
@@ -161,7 +161,7 @@ pub fn run(args: RecordArgs) -> Result<ExitStatus> {
             &recorder,
             args.episodes,
             duration,
-            Outcome::Unlabeled,
+            Label::Unlabeled,
             &stop,
             labels,
         )
@@ -260,9 +260,9 @@ fn keyboard(
         let cmd = match code {
             KeyCode::Char('c') if modifiers.contains(KeyModifiers::CONTROL) => Command::Quit,
             KeyCode::Char(' ') | KeyCode::Enter => Command::Toggle,
-            KeyCode::Char('y') => Command::Stop(Outcome::Success),
-            KeyCode::Char('n') => Command::Stop(Outcome::Failure),
-            KeyCode::Char('d') => Command::Stop(Outcome::Discarded),
+            KeyCode::Char('y') => Command::Stop(Label::Success),
+            KeyCode::Char('n') => Command::Stop(Label::Failure),
+            KeyCode::Char('d') => Command::Stop(Label::Discarded),
             KeyCode::Char('q') | KeyCode::Esc => Command::Quit,
             _ => continue,
         };

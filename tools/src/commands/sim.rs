@@ -7,7 +7,7 @@ use anyhow::Result;
 use scaledp_schema::Rig;
 
 use crate::cli::{ExitStatus, KeysArg, SimArgs};
-use crate::sim::{KeyStyle, SimOptions};
+use scaledp_sim::{KeyStyle, SimOptions};
 
 pub fn run(args: SimArgs) -> Result<ExitStatus> {
     let rig = Rig::load_or_builtin(&args.rig)?;

@@ -6,7 +6,7 @@
 use glam::{DMat3, DMat4, DVec3};
 use scaledp_schema::rig::Camera;
 
-use super::scene::{Scene, SceneState};
+use crate::scene::{Scene, SceneState};
 
 /// Where a camera sits and how it projects (OpenCV convention: z forward, x right, y down).
 #[derive(Debug, Clone, Copy)]

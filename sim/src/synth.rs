@@ -2,19 +2,18 @@
 //! the rig's rates with the same stamps, jitter and latency model as the live simulator, through
 //! the recorder's own episode writer. Benchmarks and tests use it for a fixed set of inputs.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
-use anyhow::Result;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scaledp_recorder::EpisodeOptions;
 use scaledp_schema::msg::{Header, Image, JointState, Time};
 use scaledp_schema::rig::Rig;
-use scaledp_schema::RosMessage;
+use scaledp_schema::{EpisodeMetadata, Label, RosMessage};
 
-use super::render::{self, View};
-use super::scene::Scene;
+use crate::render::{self, View};
+use crate::scene::Scene;
+use crate::{Error, Result};
 
 /// Changes one message before it is written: (topic, index within the topic, stamp in ns,
 /// payload). Tests use it to plant faults.
@@ -75,7 +74,10 @@ pub fn write_episode(
                 .cameras
                 .iter()
                 .find(|c| c.topic == t.topic)
-                .ok_or_else(|| anyhow::anyhow!("camera"))?;
+                .ok_or_else(|| Error::UnknownTopic {
+                    rig: rig.name.clone(),
+                    topic: t.topic.clone(),
+                })?;
             render::render(&scene, view, &state, cam.encoding(), table_z, &mut buf);
             let channels = render::layout(cam.encoding()).map_or(3, |l| l.0) as u32;
             let img = Image {
@@ -99,7 +101,10 @@ pub fn write_episode(
                 a.joint_state_topic == t.topic
                     || a.gripper.as_ref().is_some_and(|g| g.topic == t.topic)
             })
-            .ok_or_else(|| anyhow::anyhow!("topic {} belongs to no arm", t.topic))?;
+            .ok_or_else(|| Error::UnknownTopic {
+                rig: rig.name.clone(),
+                topic: t.topic.clone(),
+            })?;
         let (name, position) = match &arm.gripper {
             Some(g) if g.topic == t.topic => (
                 g.joint_names.clone(),
@@ -118,26 +123,43 @@ pub fn write_episode(
         }
         .to_cdr())
     };
-    let meta = BTreeMap::from([
-        ("task".to_string(), task.to_string()),
-        ("rig".to_string(), toml::to_string(rig)?),
-        ("rig_name".to_string(), rig.name.clone()),
-        ("outcome".to_string(), "success".to_string()),
-        ("synthetic".to_string(), format!("seed {seed}")),
-    ]);
-    let mut w = EpisodeOptions::new().create(path, &topics, meta.clone())?;
+    let meta = EpisodeMetadata {
+        task: task.to_string(),
+        rig_name: rig.name.clone(),
+        rig_toml: Some(toml::to_string(rig).map_err(|source| Error::Rig {
+            rig: rig.name.clone(),
+            source,
+        })?),
+        start_time_ns: Some(start_ns),
+        synthetic: Some(format!("seed {seed}")),
+        label: Some(Label::Success),
+        ..EpisodeMetadata::default()
+    };
+    let mut w = EpisodeOptions::new().create(path, &topics, meta.start_record())?;
     for (log_time, ti, k, stamp) in plan {
         let mut payload = message(ti, stamp)?;
         let mut stamp = stamp;
         mutate(&topics[ti].topic, k, &mut stamp, &mut payload);
         w.write(ti, log_time, stamp, &payload)?;
     }
-    w.finish(meta, None)?;
+    let meta = EpisodeMetadata {
+        end_time_ns: Some(start_ns + (seconds * 1e9) as u64),
+        duration_s: Some(seconds),
+        message_counts: topics
+            .iter()
+            .zip(w.message_counts())
+            .map(|(t, n)| (t.topic.clone(), *n))
+            .collect(),
+        ..meta
+    };
+    w.finish(meta.end_record(), None)?;
     Ok(())
 }
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeMap;
+
     use scaledp_schema::msg::header_stamp;
 
     use super::*;

@@ -1,4 +1,6 @@
-//! The simulated rig: publishes a rig's cameras and joint states over Zenoh exactly as
+//! The simulated rig, the stand-in for a real robot cell in demos, tests and benchmarks.
+//!
+//! [`SimOptions`] → [`SimOptions::spawn`] → [`Sim`] → [`Sim::stop`] publishes a rig's cameras and joint states over Zenoh exactly as
 //! zenoh-bridge-ros2dds does (key = topic without its leading `/`, payload = CDR with its
 //! encapsulation header), or as rmw_zenoh does (domain/topic/type/hash keys with attachments).
 //!
@@ -7,16 +9,19 @@
 //! both carry seeded jitter. Everything but the wall-clock origin is fixed by the seed; fix that
 //! too with [`SimOptions::start_time_ns`].
 
+mod error;
 pub mod render;
 pub mod scene;
 pub mod synth;
+
+pub use error::{Error, Result};
+pub use synth::write_episode;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scaledp_recorder::keys::{bridge_key, rmw_key, RmwAttachment};
@@ -179,7 +184,10 @@ impl SimOptions {
                 .declare_publisher(key.clone())
                 .congestion_control(CongestionControl::Block)
                 .wait()
-                .map_err(|e| anyhow::anyhow!("{key}: {e}"))?;
+                .map_err(|e| Error::Zenoh {
+                    key: key.clone(),
+                    reason: e.to_string(),
+                })?;
             let ctx = StreamCtx {
                 scene: scene.clone(),
                 stop: stop.clone(),
@@ -190,11 +198,11 @@ impl SimOptions {
                 t0,
                 rmw: (self.keys == KeyStyle::Rmw).then(|| vec![n as u8; 16]),
             };
-            let name = format!("sim:{}", stream.topic);
+            let topic = stream.topic.clone();
             let handle = std::thread::Builder::new()
-                .name(name)
+                .name(format!("sim:{topic}"))
                 .spawn(move || stream.run(ctx, publisher))
-                .context("spawning a sim thread")?;
+                .map_err(|source| Error::Thread { topic, source })?;
             threads.push(handle);
         }
         Ok(Sim { stop, threads })
