@@ -1,10 +1,51 @@
 #!/usr/bin/env bash
-# The whole test suite, from a fresh clone: Python peers into .venv, then one release build
-# shared by the binaries and every test (the end-to-end tests drive target/release/scaledp).
+# The whole test suite, from a fresh clone (what CI runs, through .ci/run): Python peers into
+# .venv, formatting, one release build shared by the binaries, the tests and the demo, clippy
+# with warnings as errors, the scaledp_data wheel, every test, and a check for unused
+# dependencies. Prints how long each step took and the total.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+start=$(date +%s)
+step_start=$start
+steps=()
+step() {
+  local now
+  now=$(date +%s)
+  steps+=("$(printf '%-28s %4d s' "$1" $((now - step_start)))")
+  step_start=$now
+}
+report() {
+  local rc=$?
+  echo
+  echo "== scripts/test.sh timings =="
+  printf '%s\n' "${steps[@]}"
+  printf 'total %d min %d s (exit %d)\n' $((($(date +%s) - start) / 60)) $((($(date +%s) - start) % 60)) "$rc"
+}
+trap report EXIT
+
 bash scripts/setup-python.sh
+step "python peers (.venv)"
+
 cargo fmt --all -- --check
-cargo build --release --workspace --bins --locked
+step "cargo fmt --check"
+
+# One build for everything: `cargo run --release --bin scaledp -- demo` (the README) selects the
+# same packages, so its dependencies are these artifacts too. The `tests` crate lists every
+# dev-dependency as a normal one, so building tests adds no features to a shared crate and
+# nothing compiles twice.
+cargo build --release --workspace --all-targets --locked
+step "cargo build --release"
+
+# Check mode in the release profile: build scripts and proc-macros are the ones just built.
+cargo clippy --release --workspace --all-targets --locked -- -D warnings
+step "cargo clippy -D warnings"
+
 bash scripts/build-python.sh   # the scaledp_data wheel, reusing that build
+step "scaledp_data wheel"
+
 cargo test --release --workspace --locked
+step "cargo test"
+
+bash scripts/check-deps.sh
+step "unused dependencies"
