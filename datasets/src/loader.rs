@@ -80,6 +80,8 @@ pub struct DatasetInfo {
     pub action_names: Vec<String>,
     /// `episode_index` of every episode used (the split, capped), ascending.
     pub episodes: Vec<i64>,
+    /// Frames of each of those episodes, in the same order.
+    pub episode_lengths: Vec<usize>,
     /// Frames of those episodes.
     pub frames: usize,
     /// Episodes in the whole dataset.
@@ -343,6 +345,7 @@ impl Loader {
             state_names: state_f.dim_names(),
             action_names: action_f.dim_names(),
             episodes: episodes.iter().map(|e| e.episode_index).collect(),
+            episode_lengths: lens.clone(),
             frames: lens.iter().sum(),
             total_episodes: data.episodes.len(),
         };

@@ -95,6 +95,16 @@ impl Affine {
         self.scale.len()
     }
 
+    /// Per-dimension scale: normalized = raw · scale + offset.
+    pub fn scale(&self) -> &[f64] {
+        &self.scale
+    }
+
+    /// Per-dimension offset: normalized = raw · scale + offset.
+    pub fn offset(&self) -> &[f64] {
+        &self.offset
+    }
+
     /// Normalizes rows of `dim` values in place.
     pub fn apply(&self, x: &mut [f32]) {
         for row in x.chunks_mut(self.dim().max(1)) {

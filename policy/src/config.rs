@@ -1,0 +1,235 @@
+//! What a model is: its size preset, horizons, inputs (cameras, image size, crop, state and
+//! action widths) and encoder shape. Stored in a checkpoint's `config.json`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// The paper's five sizes (Table 1): depth / width / heads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelSize {
+    /// 8 layers, d 256, 4 heads: ≈ 10 M denoiser parameters.
+    Ti,
+    /// 12 layers, d 384, 6 heads: ≈ 33 M.
+    S,
+    /// 12 layers, d 768, 12 heads: ≈ 130 M.
+    B,
+    /// 24 layers, d 1024, 16 heads: ≈ 457 M.
+    L,
+    /// 32 layers, d 1280, 16 heads: ≈ 0.95 B ("1B" in Table 1).
+    H,
+}
+
+impl ModelSize {
+    /// Every size, smallest first.
+    pub const ALL: [ModelSize; 5] = [
+        ModelSize::Ti,
+        ModelSize::S,
+        ModelSize::B,
+        ModelSize::L,
+        ModelSize::H,
+    ];
+
+    /// (depth, hidden width, heads).
+    pub fn dims(self) -> (usize, usize, usize) {
+        match self {
+            ModelSize::Ti => (8, 256, 4),
+            ModelSize::S => (12, 384, 6),
+            ModelSize::B => (12, 768, 12),
+            ModelSize::L => (24, 1024, 16),
+            ModelSize::H => (32, 1280, 16),
+        }
+    }
+
+    /// The denoiser's parameter count in Table 1 (A = 14, C = 16).
+    pub fn paper_params(self) -> f64 {
+        match self {
+            ModelSize::Ti => 10e6,
+            ModelSize::S => 33e6,
+            ModelSize::B => 130e6,
+            ModelSize::L => 457e6,
+            ModelSize::H => 1e9,
+        }
+    }
+
+    /// `ti`, `s`, `b`, `l` or `h`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelSize::Ti => "ti",
+            ModelSize::S => "s",
+            ModelSize::B => "b",
+            ModelSize::L => "l",
+            ModelSize::H => "h",
+        }
+    }
+}
+
+impl std::fmt::Display for ModelSize {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for ModelSize {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        ModelSize::ALL
+            .into_iter()
+            .find(|m| m.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| Error::Config(format!("model size {s:?}: one of ti, s, b, l, h")))
+    }
+}
+
+/// The whole model: denoiser shape, horizons, inputs and encoders.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelConfig {
+    /// The preset the denoiser's shape came from (`None`: set by hand, as tests do).
+    pub size: Option<ModelSize>,
+    /// Transformer blocks.
+    pub depth: usize,
+    /// Token width d.
+    pub hidden: usize,
+    /// Attention heads.
+    pub heads: usize,
+    /// MLP width / d (4).
+    pub mlp_ratio: usize,
+    /// Observation frames per sample, To.
+    pub obs_horizon: usize,
+    /// Actions per chunk, C.
+    pub action_chunk: usize,
+    /// State width, S.
+    pub state_dim: usize,
+    /// Action width, A.
+    pub action_dim: usize,
+    /// Camera keys (`observation.images.front`), in the order images arrive.
+    pub cameras: Vec<String>,
+    /// Image width as it arrives, before the crop.
+    pub image_width: u32,
+    /// Image height as it arrives, before the crop.
+    pub image_height: u32,
+    /// Crop side / image side (0.9: 84 → 76 as diffusion_policy; 1.0: no crop).
+    pub crop: f64,
+    /// Channels of the trunk's first stage (64 for ResNet-18).
+    pub resnet_width: usize,
+    /// SpatialSoftmax keypoints (32 → 64 values).
+    pub keypoints: usize,
+    /// Per-camera feature width after the encoder's Linear (64).
+    pub feature_dim: usize,
+}
+
+impl ModelConfig {
+    /// A preset with the paper's defaults (To 2, C 16, crop 0.9, ResNet-18 with 32 keypoints →
+    /// 64 features per camera) for the given inputs.
+    pub fn new(
+        size: ModelSize,
+        cameras: Vec<String>,
+        (image_width, image_height): (u32, u32),
+        state_dim: usize,
+        action_dim: usize,
+    ) -> Self {
+        let (depth, hidden, heads) = size.dims();
+        ModelConfig {
+            size: Some(size),
+            depth,
+            hidden,
+            heads,
+            mlp_ratio: 4,
+            obs_horizon: 2,
+            action_chunk: 16,
+            state_dim,
+            action_dim,
+            cameras,
+            image_width,
+            image_height,
+            crop: 0.9,
+            resnet_width: 64,
+            keypoints: 32,
+            feature_dim: 64,
+        }
+    }
+
+    /// The paper's bimanual setup: 3 cameras of 320×240, 14-D state and action, To 2, C 16.
+    pub fn paper(size: ModelSize) -> Self {
+        let cams = ["cam_high", "cam_left_wrist", "cam_right_wrist"]
+            .iter()
+            .map(|c| format!("observation.images.{c}"))
+            .collect();
+        ModelConfig::new(size, cams, (320, 240), 14, 14)
+    }
+
+    /// The cropped image size (width, height): `round(side · crop)`.
+    pub fn crop_size(&self) -> (usize, usize) {
+        let side = |s: u32| ((f64::from(s) * self.crop).round() as usize).clamp(1, s as usize);
+        (side(self.image_width), side(self.image_height))
+    }
+
+    /// Condition width: (features · cameras + S) · To.
+    pub fn cond_dim(&self) -> usize {
+        (self.feature_dim * self.cameras.len() + self.state_dim) * self.obs_horizon
+    }
+
+    /// The weight-name prefix of camera `i`'s encoder: `obs_encoder.<short name>`, the short name
+    /// being the key without `observation.images.` and with dots as underscores.
+    pub fn camera_prefix(&self, i: usize) -> String {
+        let key = &self.cameras[i];
+        let short = key.strip_prefix("observation.images.").unwrap_or(key);
+        format!("obs_encoder.{}", short.replace('.', "_"))
+    }
+
+    /// Checks the numbers fit together.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Config(m));
+        if self.depth == 0 || self.hidden == 0 || self.heads == 0 || self.hidden % self.heads != 0
+        {
+            return bad(format!(
+                "hidden width {} must be a positive multiple of the {} heads (depth {})",
+                self.hidden, self.heads, self.depth
+            ));
+        }
+        if self.obs_horizon == 0 || self.action_chunk == 0 || self.action_dim == 0 {
+            return bad("obs_horizon, action_chunk and the action width must be at least 1".into());
+        }
+        if !(self.crop > 0.0 && self.crop <= 1.0) {
+            return bad(format!("crop ratio {} outside (0, 1]", self.crop));
+        }
+        if !self.cameras.is_empty() {
+            let (cw, ch) = self.crop_size();
+            if cw < 8 || ch < 8 {
+                return bad(format!(
+                    "images of {}×{} cropped to {cw}×{ch}: the ResNet trunk needs at least 8×8",
+                    self.image_width, self.image_height
+                ));
+            }
+            if self.resnet_width == 0 || self.keypoints == 0 || self.feature_dim == 0 {
+                return bad("resnet_width, keypoints and feature_dim must be at least 1".into());
+            }
+        }
+        let mut prefixes: Vec<String> =
+            (0..self.cameras.len()).map(|i| self.camera_prefix(i)).collect();
+        prefixes.sort();
+        prefixes.dedup();
+        if prefixes.len() != self.cameras.len() {
+            return bad(format!("cameras {:?} share a weight prefix", self.cameras));
+        }
+        Ok(())
+    }
+}
+
+/// The diffusion schedule a model was trained with.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiffusionConfig {
+    /// DDPM training steps (100).
+    pub train_steps: usize,
+    /// DDIM sampling steps (10).
+    pub inference_steps: usize,
+}
+
+impl Default for DiffusionConfig {
+    fn default() -> Self {
+        DiffusionConfig {
+            train_steps: 100,
+            inference_steps: 10,
+        }
+    }
+}

@@ -1,0 +1,201 @@
+//! The ScaleDP network: one image encoder per camera and the DiT denoiser, built under PyTorch
+//! state-dict names so a checkpoint loads 1:1 into the reference module
+//! (`tests/py/scaledp_torch.py`).
+
+pub(crate) mod conv;
+pub(crate) mod denoiser;
+pub(crate) mod encoder;
+pub(crate) mod fused;
+pub mod params;
+pub(crate) mod resnet;
+
+use candle_core::{Device, Tensor};
+use rand_chacha::ChaCha8Rng;
+
+use crate::config::ModelConfig;
+use crate::error::{Error, Result};
+pub use encoder::Crop;
+use encoder::{crop_images, ObsEncoder};
+use params::{Builder, Param};
+
+pub use denoiser::timestep_embedding;
+use denoiser::{Denoiser, DenoiserDims};
+
+/// Parameter counts of a model, encoders and denoiser apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ParamCounts {
+    /// One camera's encoder (ResNet-18-GN + SpatialSoftmax + Linear).
+    pub encoder_per_camera: usize,
+    /// All encoders.
+    pub encoders: usize,
+    /// The denoiser (what Table 1 of the paper counts).
+    pub denoiser: usize,
+}
+
+impl ParamCounts {
+    /// Everything.
+    pub fn total(&self) -> usize {
+        self.encoders + self.denoiser
+    }
+}
+
+/// The network: encoders and denoiser.
+#[derive(Clone, Debug)]
+pub struct ScaleDp {
+    cfg: ModelConfig,
+    encoders: Vec<ObsEncoder>,
+    denoiser: Denoiser,
+    device: Device,
+}
+
+impl ScaleDp {
+    fn build(vb: &Builder, cfg: &ModelConfig, device: &Device) -> Result<Self> {
+        cfg.validate()?;
+        let encoders = (0..cfg.cameras.len())
+            .map(|i| {
+                ObsEncoder::new(
+                    &vb.pp(cfg.camera_prefix(i)),
+                    cfg.resnet_width,
+                    cfg.keypoints,
+                    cfg.feature_dim,
+                )
+            })
+            .collect::<Result<_>>()?;
+        let denoiser = Denoiser::new(vb, dims(cfg))?;
+        Ok(ScaleDp {
+            cfg: cfg.clone(),
+            encoders,
+            denoiser,
+            device: device.clone(),
+        })
+    }
+
+    /// A freshly initialised model (DiT's adaLN-Zero init for the denoiser, torchvision's for
+    /// the trunks), the same for the same seed, and its parameters in creation order.
+    pub(crate) fn fresh(cfg: &ModelConfig, seed: u64, device: &Device) -> Result<(Self, Vec<Param>)> {
+        let vb = Builder::fresh(seed, device);
+        let model = Self::build(&vb, cfg, device)?;
+        Ok((model, vb.finish()?.0))
+    }
+
+    /// The model with the given weights (every tensor of `cfg` present, no other).
+    pub(crate) fn from_tensors(
+        cfg: &ModelConfig,
+        tensors: std::collections::HashMap<String, Tensor>,
+        file: &str,
+        device: &Device,
+    ) -> Result<(Self, Vec<Param>)> {
+        let vb = Builder::load(tensors, file, device);
+        let model = Self::build(&vb, cfg, device)?;
+        Ok((model, vb.finish()?.0))
+    }
+
+    /// Parameter counts of `cfg`, computed from the shapes the builder hands out (nothing is
+    /// allocated, so the 1 B-parameter size costs nothing).
+    pub fn count(cfg: &ModelConfig) -> Result<ParamCounts> {
+        cfg.validate()?;
+        let vb = Builder::shapes();
+        Denoiser::new(&vb, dims(cfg))?;
+        let denoiser = vb.finish()?.1;
+        let encoder_per_camera = if cfg.cameras.is_empty() {
+            0
+        } else {
+            let vb = Builder::shapes();
+            ObsEncoder::new(&vb, cfg.resnet_width, cfg.keypoints, cfg.feature_dim)?;
+            vb.finish()?.1
+        };
+        Ok(ParamCounts {
+            encoder_per_camera,
+            encoders: encoder_per_camera * cfg.cameras.len(),
+            denoiser,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ModelConfig {
+        &self.cfg
+    }
+
+    /// The device the weights live on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The condition vectors `[B, cond_dim]` of `b` samples: `images` uint8
+    /// `[B, To, cams, 3, H, W]` (cropped as `crop` says, drawing from `rng`), `state`
+    /// normalized `[B, To, S]`. Per observation step: each camera's features, then the state;
+    /// flattened over To.
+    pub fn encode(
+        &self,
+        images: &[u8],
+        state: &[f32],
+        b: usize,
+        crop: Crop,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Tensor> {
+        let c = &self.cfg;
+        let (to, cams, s) = (c.obs_horizon, c.cameras.len(), c.state_dim);
+        let (w, h) = (c.image_width as usize, c.image_height as usize);
+        if images.len() != b * to * cams * 3 * w * h || state.len() != b * to * s {
+            return Err(Error::Observation(format!(
+                "{} image bytes and {} state values for {b} samples of {to} frames, {cams} cameras of {w}×{h} and {s} state values",
+                images.len(),
+                state.len()
+            )));
+        }
+        let mut parts = Vec::with_capacity(cams + 1);
+        for (i, enc) in self.encoders.iter().enumerate() {
+            let x = crop_images(
+                images,
+                |n| n * cams + i,
+                b * to,
+                (w, h),
+                c.crop_size(),
+                crop,
+                rng,
+                &self.device,
+            )?;
+            parts.push(enc.forward(&x)?);
+        }
+        parts.push(Tensor::from_slice(state, (b * to, s), &self.device)?);
+        let feats = Tensor::cat(&parts, 1)?;
+        Ok(feats.reshape((b, c.cond_dim()))?)
+    }
+
+    /// ε̂ for noisy actions `x` `[B, C, A]` at timesteps `t` (one per sample) under `cond`.
+    pub fn predict_noise(&self, x: &Tensor, t: &[f32], cond: &Tensor) -> Result<Tensor> {
+        let c = self.condition(t, cond)?;
+        self.denoiser.forward(x, &c)
+    }
+
+    /// The adaLN condition `t_emb + cond_emb` (computed once per DDIM step).
+    pub(crate) fn condition(&self, t: &[f32], cond: &Tensor) -> Result<Tensor> {
+        let tf = timestep_embedding(t, &self.device)?;
+        self.denoiser.condition(&tf, cond)
+    }
+
+    /// ε̂ under a precomputed condition.
+    pub(crate) fn denoise(&self, x: &Tensor, c: &Tensor) -> Result<Tensor> {
+        self.denoiser.forward(x, c)
+    }
+}
+
+fn dims(cfg: &ModelConfig) -> DenoiserDims {
+    DenoiserDims {
+        depth: cfg.depth,
+        hidden: cfg.hidden,
+        heads: cfg.heads,
+        mlp_ratio: cfg.mlp_ratio,
+        action_dim: cfg.action_dim,
+        action_chunk: cfg.action_chunk,
+        cond_dim: cfg.cond_dim(),
+    }
+}
+
+impl ScaleDp {
+    /// Temporary: a fresh model for the speed example.
+    #[doc(hidden)]
+    pub fn fresh_for_bench(cfg: &ModelConfig, seed: u64, device: &Device) -> Result<(Self, Vec<Param>)> {
+        Self::fresh(cfg, seed, device)
+    }
+}

@@ -1,0 +1,2 @@
+//! Training (work in progress).
+pub(crate) mod optim;
