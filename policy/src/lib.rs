@@ -5,6 +5,7 @@ mod config;
 mod error;
 mod inference;
 pub mod model;
+mod predict;
 mod scheduler;
 mod trainer;
 
@@ -12,4 +13,9 @@ pub use checkpoint::{CheckpointConfig, Normalization, NormalizerConfig};
 pub use config::{DiffusionConfig, ModelConfig, ModelSize};
 pub use error::{Error, Result};
 pub use inference::{ddim_sample, ActionChunk, Observation, Policy};
+pub use predict::{predict_episode, EpisodePrediction};
 pub use scheduler::NoiseScheduler;
+pub use trainer::{
+    cosine_lr, AdamWConfig, EmaConfig, Event, StepRecord, Summary, TrainOptions, Trainer,
+    ValRecord,
+};

@@ -3,7 +3,7 @@
 //! ops, a GroupNorm is ~12 passes over the activation in the forward pass and more in the
 //! backward, each allocating; these are two or three. Other devices use composed ops.
 
-use candle_core::{CpuStorage, CustomOp1, CustomOp2, CustomOp3, Device, Layout, Shape, Tensor};
+use candle_core::{CpuStorage, CustomOp1, CustomOp2, CustomOp3, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
 /// `GroupNorm(groups, eps)` of `x` `[N, C, *]` with per-channel `gamma`, `beta`, then ReLU
@@ -329,7 +329,7 @@ impl CustomOp2 for MaxPoolGrad {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::Var;
+    use candle_core::{Device, Var};
 
     fn max_diff(a: &Tensor, b: &Tensor) -> f32 {
         (a - b)

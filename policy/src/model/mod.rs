@@ -6,7 +6,7 @@ pub(crate) mod conv;
 pub(crate) mod denoiser;
 pub(crate) mod encoder;
 pub(crate) mod fused;
-pub mod params;
+pub(crate) mod params;
 pub(crate) mod resnet;
 
 use candle_core::{Device, Tensor};
@@ -46,6 +46,7 @@ pub struct ScaleDp {
     encoders: Vec<ObsEncoder>,
     denoiser: Denoiser,
     device: Device,
+    weights: Vec<(String, Tensor)>,
 }
 
 impl ScaleDp {
@@ -67,6 +68,7 @@ impl ScaleDp {
             encoders,
             denoiser,
             device: device.clone(),
+            weights: Vec::new(),
         })
     }
 
@@ -74,8 +76,55 @@ impl ScaleDp {
     /// the trunks), the same for the same seed, and its parameters in creation order.
     pub(crate) fn fresh(cfg: &ModelConfig, seed: u64, device: &Device) -> Result<(Self, Vec<Param>)> {
         let vb = Builder::fresh(seed, device);
-        let model = Self::build(&vb, cfg, device)?;
-        Ok((model, vb.finish()?.0))
+        let mut model = Self::build(&vb, cfg, device)?;
+        let params = vb.finish()?.0;
+        model.weights = named(&params);
+        Ok((model, params))
+    }
+
+    /// A freshly initialised model: the denoiser as DiT (adaLN-Zero: it outputs exactly 0 until
+    /// trained), the trunks as torchvision; the same weights for the same seed.
+    pub fn new(cfg: &ModelConfig, seed: u64, device: &Device) -> Result<Self> {
+        Ok(Self::fresh(cfg, seed, device)?.0)
+    }
+
+    /// A model whose every weight is drawn from N(0, std²) (norm weights around 1): no zero
+    /// anywhere, for tests and comparisons with reference implementations.
+    pub fn random(cfg: &ModelConfig, seed: u64, std: f64, device: &Device) -> Result<Self> {
+        let shapes = Self::fresh(cfg, seed, device)?.1;
+        let mut rng = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed ^ 0x5eed);
+        let tensors = shapes
+            .iter()
+            .map(|p| {
+                let t = p.var.as_tensor();
+                let mut v = params::randn(&mut rng, t.elem_count());
+                let norm = p.name.contains(".bn") || p.name.contains("downsample.1");
+                for x in &mut v {
+                    *x *= std as f32;
+                    if norm && p.name.ends_with("weight") {
+                        *x += 1.0;
+                    }
+                }
+                Ok((p.name.clone(), Tensor::from_vec(v, t.dims(), device)?))
+            })
+            .collect::<Result<_>>()?;
+        Ok(Self::from_tensors(cfg, tensors, "(random)", device)?.0)
+    }
+
+    /// Loads weights saved by [`ScaleDp::save`] (or a checkpoint's `model.safetensors`).
+    pub fn load(cfg: &ModelConfig, path: &std::path::Path, device: &Device) -> Result<Self> {
+        let tensors = crate::checkpoint::read_tensors(path, device)?;
+        Ok(Self::from_tensors(cfg, tensors, &path.display().to_string(), device)?.0)
+    }
+
+    /// Writes the weights as safetensors under their PyTorch names.
+    pub fn save(&self, path: &std::path::Path) -> Result<()> {
+        crate::checkpoint::write_tensors(path, self.weights.clone())
+    }
+
+    /// The weights by PyTorch name, in creation order.
+    pub fn weights(&self) -> &[(String, Tensor)] {
+        &self.weights
     }
 
     /// The model with the given weights (every tensor of `cfg` present, no other).
@@ -86,8 +135,10 @@ impl ScaleDp {
         device: &Device,
     ) -> Result<(Self, Vec<Param>)> {
         let vb = Builder::load(tensors, file, device);
-        let model = Self::build(&vb, cfg, device)?;
-        Ok((model, vb.finish()?.0))
+        let mut model = Self::build(&vb, cfg, device)?;
+        let params = vb.finish()?.0;
+        model.weights = named(&params);
+        Ok((model, params))
     }
 
     /// Parameter counts of `cfg`, computed from the shapes the builder hands out (nothing is
@@ -192,10 +243,9 @@ fn dims(cfg: &ModelConfig) -> DenoiserDims {
     }
 }
 
-impl ScaleDp {
-    /// Temporary: a fresh model for the speed example.
-    #[doc(hidden)]
-    pub fn fresh_for_bench(cfg: &ModelConfig, seed: u64, device: &Device) -> Result<(Self, Vec<Param>)> {
-        Self::fresh(cfg, seed, device)
-    }
+fn named(params: &[Param]) -> Vec<(String, Tensor)> {
+    params
+        .iter()
+        .map(|p| (p.name.clone(), p.var.as_tensor().clone()))
+        .collect()
 }

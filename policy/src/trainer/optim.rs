@@ -6,7 +6,6 @@
 
 use std::cell::RefCell;
 
-use candle_core::backprop::GradStore;
 use candle_core::{CpuStorage, InplaceOp2, Layout, Tensor};
 use rayon::prelude::*;
 
@@ -86,29 +85,25 @@ impl AdamW {
         &self.params
     }
 
-    pub fn step_count(&self) -> u64 {
-        self.step
-    }
-
-    /// The global L2 norm of the gradients (PyTorch's `clip_grad_norm_` total norm).
-    pub fn grad_norm(&self, grads: &GradStore) -> Result<f64> {
+    /// The global L2 norm of the gradients (PyTorch's `clip_grad_norm_` total norm);
+    /// `grads[i]` belongs to `params()[i]`.
+    pub fn grad_norm(grads: &[Option<Tensor>]) -> Result<f64> {
         let mut total = 0f64;
-        for p in &self.params {
-            if let Some(g) = grads.get(p.var.as_tensor()) {
-                total += f64::from(g.sqr()?.sum_all()?.to_scalar::<f32>()?);
-            }
+        for g in grads.iter().flatten() {
+            total += f64::from(g.sqr()?.sum_all()?.to_scalar::<f32>()?);
         }
         Ok(total.sqrt())
     }
 
-    /// One update at learning rate `lr`, gradients multiplied by `grad_scale` (clipping).
-    pub fn step(&mut self, grads: &GradStore, lr: f64, grad_scale: f64) -> Result<()> {
+    /// One update at learning rate `lr`, gradients (aligned with `params()`, `None` for an
+    /// unused parameter) multiplied by `grad_scale` (clipping).
+    pub fn step(&mut self, grads: &[Option<Tensor>], lr: f64, grad_scale: f64) -> Result<()> {
         self.step += 1;
         let c = self.cfg;
         let bc1 = 1.0 - c.beta1.powi(self.step as i32);
         let bc2 = 1.0 - c.beta2.powi(self.step as i32);
-        for (p, mom) in self.params.iter().zip(self.moments.iter_mut()) {
-            let Some(g) = grads.get(p.var.as_tensor()) else {
+        for ((p, mom), g) in self.params.iter().zip(self.moments.iter_mut()).zip(grads) {
+            let Some(g) = g else {
                 continue;
             };
             let wd = if p.decay { c.weight_decay } else { 0.0 };

@@ -1,0 +1,208 @@
+//! [`TrainOptions`]: what a training run does, with chained setters and the paper's defaults.
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::ModelSize;
+use crate::trainer::optim::{AdamWConfig, EmaConfig};
+
+/// Options of a training run; every default is the paper's / diffusion_policy's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainOptions {
+    pub(crate) size: ModelSize,
+    /// (depth, hidden, heads) overriding the size preset (tests use tiny denoisers).
+    pub(crate) denoiser: Option<(usize, usize, usize)>,
+    pub(crate) resnet_width: usize,
+    pub(crate) steps: u64,
+    pub(crate) batch_size: usize,
+    pub(crate) micro_batch: Option<usize>,
+    pub(crate) lr: f64,
+    pub(crate) warmup_steps: u64,
+    pub(crate) adamw: AdamWConfig,
+    pub(crate) ema: EmaConfig,
+    pub(crate) grad_clip: Option<f64>,
+    pub(crate) seed: u64,
+    pub(crate) checkpoint_every: u64,
+    pub(crate) val_every: u64,
+    pub(crate) val_ratio: f64,
+    pub(crate) val_batches: usize,
+    pub(crate) obs_horizon: usize,
+    pub(crate) action_chunk: usize,
+    pub(crate) cameras: Option<Vec<String>>,
+    pub(crate) image_size: Option<(u32, u32)>,
+    pub(crate) crop: f64,
+    pub(crate) loader_threads: usize,
+    pub(crate) max_episodes: Option<usize>,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        TrainOptions {
+            size: ModelSize::Ti,
+            denoiser: None,
+            resnet_width: 64,
+            steps: 10_000,
+            batch_size: 64,
+            micro_batch: None,
+            lr: 1e-4,
+            warmup_steps: 500,
+            adamw: AdamWConfig::default(),
+            ema: EmaConfig::default(),
+            grad_clip: None,
+            seed: 0,
+            checkpoint_every: 1000,
+            val_every: 1000,
+            val_ratio: 0.05,
+            val_batches: 4,
+            obs_horizon: 2,
+            action_chunk: 16,
+            cameras: None,
+            image_size: None,
+            crop: 0.9,
+            loader_threads: 0,
+            max_episodes: None,
+        }
+    }
+}
+
+impl TrainOptions {
+    /// Model size preset (default `ti`).
+    pub fn model(mut self, size: ModelSize) -> Self {
+        self.size = size;
+        self
+    }
+    /// A denoiser of this depth, width and head count instead of the preset's (for tests and
+    /// ablations).
+    pub fn denoiser(mut self, depth: usize, hidden: usize, heads: usize) -> Self {
+        self.denoiser = Some((depth, hidden, heads));
+        self
+    }
+    /// Channels of the ResNet trunks' first stage (default 64, ResNet-18).
+    pub fn resnet_width(mut self, width: usize) -> Self {
+        self.resnet_width = width;
+        self
+    }
+    /// Optimizer steps in total (default 10 000).
+    pub fn steps(mut self, n: u64) -> Self {
+        self.steps = n;
+        self
+    }
+    /// Samples per step (default 64).
+    pub fn batch_size(mut self, n: usize) -> Self {
+        self.batch_size = n;
+        self
+    }
+    /// Split each batch into forward/backward passes of at most `n` samples whose gradients
+    /// are summed (the same update, less memory; default: the whole batch at once).
+    pub fn micro_batch(mut self, n: usize) -> Self {
+        self.micro_batch = Some(n);
+        self
+    }
+    /// Peak learning rate (default 1e-4).
+    pub fn lr(mut self, lr: f64) -> Self {
+        self.lr = lr;
+        self
+    }
+    /// Linear warm-up steps of the cosine schedule (default 500).
+    pub fn warmup_steps(mut self, n: u64) -> Self {
+        self.warmup_steps = n;
+        self
+    }
+    /// AdamW's betas, epsilon and weight decay (default 0.9 / 0.95, 1e-8, 1e-3).
+    pub fn adamw(mut self, cfg: AdamWConfig) -> Self {
+        self.adamw = cfg;
+        self
+    }
+    /// The EMA's schedule (default power 0.75, max 0.9999).
+    pub fn ema(mut self, cfg: EmaConfig) -> Self {
+        self.ema = cfg;
+        self
+    }
+    /// Clip the global gradient norm to `max_norm` (default: no clipping).
+    pub fn grad_clip(mut self, max_norm: f64) -> Self {
+        self.grad_clip = Some(max_norm);
+        self
+    }
+    /// Seed of the weights, crops, timesteps, noise and data order (default 0).
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+    /// Write a checkpoint every `n` steps (default 1000; 0: only at the end).
+    pub fn checkpoint_every(mut self, n: u64) -> Self {
+        self.checkpoint_every = n;
+        self
+    }
+    /// Validate every `n` steps (default 1000; 0: never).
+    pub fn val_every(mut self, n: u64) -> Self {
+        self.val_every = n;
+        self
+    }
+    /// Fraction of episodes held out for validation (default 0.05).
+    pub fn val_ratio(mut self, r: f64) -> Self {
+        self.val_ratio = r;
+        self
+    }
+    /// Validation batches per validation (default 4).
+    pub fn val_batches(mut self, n: usize) -> Self {
+        self.val_batches = n;
+        self
+    }
+    /// Observation frames, To (default 2).
+    pub fn obs_horizon(mut self, n: usize) -> Self {
+        self.obs_horizon = n;
+        self
+    }
+    /// Actions per chunk, C (default 16).
+    pub fn action_chunk(mut self, n: usize) -> Self {
+        self.action_chunk = n;
+        self
+    }
+    /// Cameras to use (short names or keys; default all).
+    pub fn cameras(mut self, names: Vec<String>) -> Self {
+        self.cameras = Some(names);
+        self
+    }
+    /// Resize images to this (width, height) before the crop (default: as stored).
+    pub fn image_size(mut self, width: u32, height: u32) -> Self {
+        self.image_size = Some((width, height));
+        self
+    }
+    /// Crop side / image side (default 0.9).
+    pub fn crop(mut self, ratio: f64) -> Self {
+        self.crop = ratio;
+        self
+    }
+    /// The loader's decoding threads (default 0: one per core).
+    pub fn loader_threads(mut self, n: usize) -> Self {
+        self.loader_threads = n;
+        self
+    }
+    /// Train on at most this many episodes (data-scaling studies).
+    pub fn max_episodes(mut self, n: usize) -> Self {
+        self.max_episodes = Some(n);
+        self
+    }
+
+    /// The seed.
+    pub fn get_seed(&self) -> u64 {
+        self.seed
+    }
+    /// Total steps.
+    pub fn get_steps(&self) -> u64 {
+        self.steps
+    }
+    /// Samples per step.
+    pub fn get_batch_size(&self) -> usize {
+        self.batch_size
+    }
+}
+
+/// diffusers' `get_cosine_schedule_with_warmup` (half a cosine): the learning rate of the
+/// update made after `step` earlier updates.
+pub fn cosine_lr(base: f64, step: u64, warmup: u64, total: u64) -> f64 {
+    if step < warmup {
+        return base * step as f64 / warmup.max(1) as f64;
+    }
+    let progress = (step - warmup) as f64 / (total.saturating_sub(warmup)).max(1) as f64;
+    base * (0.5 * (1.0 + (std::f64::consts::PI * progress).cos())).max(0.0)
+}
