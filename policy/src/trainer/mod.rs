@@ -451,7 +451,9 @@ impl Trainer {
 
     fn log(&mut self, v: &serde_json::Value) -> Result<()> {
         let path = self.out.join("metrics.jsonl");
-        writeln!(self.metrics, "{v}").map_err(|e| Error::io(&path, e))
+        writeln!(self.metrics, "{v}")
+            .and_then(|()| self.metrics.flush())
+            .map_err(|e| Error::io(&path, e))
     }
 }
 

@@ -147,7 +147,7 @@ pub fn write(fx: &Fixture) -> Written {
     Written { dir, root }
 }
 
-fn stats(rows: &[(usize, usize)], dim: usize, f: impl Fn(usize, usize, usize) -> f32) -> serde_json::Value {
+fn stats(rows: &[(usize, usize)], dim: usize, f: fn(usize, usize, usize) -> f32) -> serde_json::Value {
     let col = |d: usize| rows.iter().map(move |&(e, fr)| f64::from(f(e, fr, d)));
     let n = rows.len() as f64;
     let min: Vec<f64> = (0..dim).map(|d| col(d).fold(f64::INFINITY, f64::min)).collect();
@@ -197,10 +197,9 @@ fn write_meta(fx: &Fixture, root: &Path, rows: &[(usize, usize)]) {
         "features": features,
         "scaledp": {"rig": "test_rig"},
     });
-    let finite = |f: fn(usize, usize, usize) -> f32| move |e, fr, d| f(e, fr, d);
     let stats = serde_json::json!({
-        "observation.state": stats(rows, fx.state_dim, finite(state)),
-        "action": stats(rows, fx.action_dim, finite(action)),
+        "observation.state": stats(rows, fx.state_dim, state),
+        "action": stats(rows, fx.action_dim, action),
     });
     std::fs::create_dir_all(root.join("meta")).unwrap();
     std::fs::write(root.join("meta/info.json"), serde_json::to_vec_pretty(&info).unwrap()).unwrap();
