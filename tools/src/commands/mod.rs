@@ -1,10 +1,5 @@
 //! One module per subcommand; `dispatch` picks it.
 
-mod bench;
-mod bench_convert;
-mod bench_load;
-mod bench_load_data;
-mod bench_python;
 mod convert;
 mod demo;
 mod record;
@@ -27,9 +22,7 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
             out,
             file_size_mb,
         }) => convert::merge(&inputs, &out, file_size_mb),
-        Command::Bench(crate::cli::BenchCommand::Record(args)) => bench::record(args),
-        Command::Bench(crate::cli::BenchCommand::Convert(args)) => bench_convert::run(args),
-        Command::Bench(crate::cli::BenchCommand::Load(args)) => bench_load::run(args),
+        Command::Bench(cmd) => scaledp_bench::run(cmd).map(ExitStatus::from),
         Command::Demo(args) => demo::run(args),
     }
 }

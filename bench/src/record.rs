@@ -14,7 +14,7 @@ use scaledp_recorder::net;
 use scaledp_schema::Rig;
 use zenoh::Wait;
 
-use crate::cli::{BenchRecordArgs, CompressionArg, ExitStatus};
+use crate::{BenchRecordArgs, Compression as CompressionArg, Outcome};
 use scaledp_sim::SimOptions;
 
 const REFERENCE_RIG: &str = r#"
@@ -88,7 +88,7 @@ fn wait_status(
     bail!("no '{event}' from the recorder within {timeout:?}")
 }
 
-pub fn record(args: BenchRecordArgs) -> Result<ExitStatus> {
+pub fn record(args: BenchRecordArgs) -> Result<Outcome> {
     let tmp = tempfile::tempdir()?;
     let out = args
         .out
@@ -97,7 +97,7 @@ pub fn record(args: BenchRecordArgs) -> Result<ExitStatus> {
     let rig_path = tmp.path().join("bench_reference.toml");
     std::fs::write(&rig_path, REFERENCE_RIG)?;
     let rig = Rig::load(&rig_path)?;
-    let endpoint = format!("tcp/127.0.0.1:{}", super::free_port()?);
+    let endpoint = format!("tcp/127.0.0.1:{}", scaledp_testkit::free_port()?);
     let prefix = format!("scaledp/bench/{}", std::process::id());
     let session = net::open(net::zenoh_config(
         None,
@@ -222,7 +222,7 @@ fn report(
     cpu: Option<(f64, f64)>,
     exit_code: Option<i32>,
     out: &Path,
-) -> Result<ExitStatus> {
+) -> Result<Outcome> {
     let file = finished["path"].as_str().unwrap_or_default();
     let size = std::fs::metadata(file).map(|m| m.len()).unwrap_or(0);
     println!(
@@ -278,8 +278,8 @@ fn report(
         if pass { "met" } else { "NOT met" }
     );
     Ok(if lost > 0 {
-        ExitStatus::DataLost
+        Outcome::DataLost
     } else {
-        ExitStatus::Success
+        Outcome::Completed
     })
 }

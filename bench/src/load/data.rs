@@ -24,7 +24,7 @@ use zune_core::colorspace::ColorSpace;
 use zune_core::options::DecoderOptions;
 use zune_jpeg::JpegDecoder;
 
-use super::bench_convert::synthesize;
+use crate::convert::synthesize;
 
 const RIG: &str = "bimanual_ur5_3rs";
 const TASK: &str = "hand the cup from the left arm to the right";
@@ -32,7 +32,7 @@ const WIDTH: u32 = 320;
 const HEIGHT: u32 = 240;
 
 /// What to generate.
-pub(super) struct DataSpec {
+pub(crate) struct DataSpec {
     /// Episodes.
     pub episodes: usize,
     /// Seconds per episode.
@@ -81,7 +81,7 @@ fn bar(len: u64, what: &str) -> ProgressBar {
 }
 
 /// The generated dataset under `cache` (made if absent or incomplete) and how it was made.
-pub(super) fn ensure_dataset(cache: &Path, spec: &DataSpec) -> Result<(PathBuf, String)> {
+pub(crate) fn ensure_dataset(cache: &Path, spec: &DataSpec) -> Result<(PathBuf, String)> {
     let name = name(spec);
     let dir = cache.join(&name);
     let how = format!(
@@ -160,7 +160,7 @@ fn generate(cache: &Path, dir: &Path, spec: &DataSpec) -> Result<()> {
 }
 
 /// `factor` copies of `dataset` merged into one (made if absent or incomplete), and how.
-pub(super) fn ensure_larger(
+pub(crate) fn ensure_larger(
     cache: &Path,
     dataset: &Path,
     spec: &DataSpec,
@@ -193,7 +193,7 @@ const POOL_NAME: &str = "pure-decode-";
 
 /// What the pure-decode run measured.
 #[derive(Default)]
-pub(super) struct PureDecode {
+pub(crate) struct PureDecode {
     /// JPEGs decoded (by each pass).
     pub images: u64,
     /// zune-jpeg into a reused interleaved RGB buffer: the physical limit.
@@ -204,7 +204,7 @@ pub(super) struct PureDecode {
 }
 
 /// Time spent in one pass over the JPEGs (parquet reading left out).
-pub(super) struct Pass {
+pub(crate) struct Pass {
     /// Wall seconds.
     pub seconds: f64,
     /// CPU seconds of the decoding threads (clock ticks from /proc); None if unreadable.
@@ -258,7 +258,7 @@ thread_local! {
 /// max(t−To+1, 0) ..= t of every camera — the images the loader decodes, same count — with
 /// zune-jpeg into a reused per-thread buffer on a pool of `threads`, then again with the loader's
 /// own decoder (to channel-first). Only the decoding is timed (the parquet reading is not).
-pub(super) fn pure_decode(dataset: &Path, to: usize, threads: usize) -> Result<PureDecode> {
+pub(crate) fn pure_decode(dataset: &Path, to: usize, threads: usize) -> Result<PureDecode> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("{POOL_NAME}{i}"))

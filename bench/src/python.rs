@@ -10,15 +10,15 @@ use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 use std::time::Duration;
 
-use super::bench_convert::{measure, Measured};
-use crate::cli::BenchLoadArgs;
+use crate::convert::{measure, Measured};
+use crate::BenchLoadArgs;
 
 const LEROBOT_SCRIPT: &str = "tests/py/lerobot_baseline.py";
 const MODULE_SCRIPT: &str = "tests/py/scaledp_data_epoch.py";
 const TIMEOUT: Duration = Duration::from_secs(1800);
 
 /// What the LeRobot route did.
-pub(super) struct LeRobotRun {
+pub(crate) struct LeRobotRun {
     pub version: String,
     pub samples: u64,
     pub seconds: f64,
@@ -28,7 +28,7 @@ pub(super) struct LeRobotRun {
 }
 
 /// What the `scaledp_data` route did.
-pub(super) struct ModuleRun {
+pub(crate) struct ModuleRun {
     pub samples: u64,
     pub images: u64,
     pub seconds: f64,
@@ -37,7 +37,7 @@ pub(super) struct ModuleRun {
 
 /// Where a route finds its Python: `env` if set, else `venv` (relative to the workspace),
 /// whose absence `hint` explains.
-pub(super) struct PythonFor {
+pub(crate) struct PythonFor {
     pub env: &'static str,
     pub venv: &'static str,
     pub hint: &'static str,
@@ -50,7 +50,7 @@ const BENCH_PYTHON: PythonFor = PythonFor {
 };
 
 /// The workspace (the directory holding `script`) and the Python to run it with.
-pub(super) fn python(
+pub(crate) fn python(
     exe: &Path,
     script: &str,
     which: &PythonFor,
@@ -82,7 +82,7 @@ pub(super) fn python(
 
 /// Runs `cmd` (a script of `python`) to the end or `timeout`, and parses its last stdout line
 /// as JSON.
-pub(super) fn run_json(
+pub(crate) fn run_json(
     python: &Path,
     cmd: Process,
     timeout: Duration,
@@ -103,7 +103,7 @@ pub(super) fn run_json(
 }
 
 /// Runs `tests/py/lerobot_baseline.py` with `workers` DataLoader workers.
-pub(super) fn run_lerobot(
+pub(crate) fn run_lerobot(
     exe: &Path,
     dataset: &Path,
     cache: &Path,
@@ -134,7 +134,7 @@ pub(super) fn run_lerobot(
 }
 
 /// Runs one epoch of `scaledp_data.Loader` from the newest wheel in `target/wheels`.
-pub(super) fn run_module(
+pub(crate) fn run_module(
     exe: &Path,
     dataset: &Path,
     cache: &Path,

@@ -14,15 +14,15 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use scaledp_schema::Rig;
 
-use super::bench_python::{python, run_json, PythonFor};
-use crate::cli::{BenchConvertArgs, ExitStatus};
+use crate::python::{python, run_json, PythonFor};
+use crate::{BenchConvertArgs, Outcome};
 
 /// Frames/s of ours over the Python route that the issue asks for.
 const TARGET_RATIO: f64 = 10.0;
 const BASELINE_SCRIPT: &str = "tests/py/convert_baseline.py";
 
 /// What one measured child process did.
-pub(super) struct Measured {
+pub(crate) struct Measured {
     pub status: ProcessStatus,
     pub wall_s: f64,
     /// Last `VmHWM` seen (bytes); None when /proc was unreadable.
@@ -33,7 +33,7 @@ pub(super) struct Measured {
     pub stderr: Vec<String>,
 }
 
-pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
+pub fn run(args: BenchConvertArgs) -> Result<Outcome> {
     if args.episodes == 0 || !args.seconds.is_finite() || args.seconds <= 0.0 {
         bail!("need --episodes >= 1 and --seconds > 0");
     }
@@ -200,12 +200,12 @@ pub fn run(args: BenchConvertArgs) -> Result<ExitStatus> {
     } else {
         println!("(generated data removed; pass --out DIR to keep it)");
     }
-    Ok(ExitStatus::Success)
+    Ok(Outcome::Completed)
 }
 
 /// Writes episodes `ids` (seed = id) of `rig` as recorder-style MCAP files into `dir`, `jobs`
 /// at a time; returns their paths.
-pub(super) fn synthesize(
+pub(crate) fn synthesize(
     dir: &Path,
     rig: &Rig,
     ids: &[usize],
@@ -288,7 +288,7 @@ fn run_baseline(
 
 /// Runs `cmd` to the end (killing it after `timeout`), forwarding its output to stderr, and
 /// polls its peak resident set size every 20 ms.
-pub(super) fn measure(mut cmd: Process, timeout: Option<Duration>) -> Result<Measured> {
+pub(crate) fn measure(mut cmd: Process, timeout: Option<Duration>) -> Result<Measured> {
     let t0 = Instant::now();
     let mut child = cmd
         .stdin(Stdio::null())
@@ -369,7 +369,7 @@ fn cpu_seconds(pid: u32) -> Option<f64> {
 }
 
 /// Bytes of all files under `dir` (0 when it does not exist).
-pub(super) fn dir_bytes(dir: &Path) -> Result<u64> {
+pub(crate) fn dir_bytes(dir: &Path) -> Result<u64> {
     if !dir.exists() {
         return Ok(0);
     }

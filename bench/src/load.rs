@@ -14,10 +14,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use scaledp_datasets::LoaderOptions;
 
-use super::bench_convert::{dir_bytes, measure, Measured};
-use super::bench_load_data::{ensure_dataset, ensure_larger, pure_decode, DataSpec};
-use super::bench_python::{run_lerobot, run_module};
-use crate::cli::{BenchLoadArgs, ExitStatus};
+mod data;
+
+use crate::convert::{dir_bytes, measure, Measured};
+use crate::python::{run_lerobot, run_module};
+use crate::{BenchLoadArgs, Outcome};
+use data::{ensure_dataset, ensure_larger, pure_decode, DataSpec};
 
 const OBS_HORIZON: usize = 2;
 const ACTION_CHUNK: usize = 16;
@@ -50,7 +52,7 @@ struct Row {
     peak_rss: Option<u64>,
 }
 
-pub fn run(args: BenchLoadArgs) -> Result<ExitStatus> {
+pub fn run(args: BenchLoadArgs) -> Result<Outcome> {
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
     let threads = args.threads.unwrap_or(cores).max(1);
     if let Some(mode) = &args.worker {
@@ -232,7 +234,7 @@ pub fn run(args: BenchLoadArgs) -> Result<ExitStatus> {
             if met { "met" } else { "NOT met" }
         );
     }
-    Ok(ExitStatus::Success)
+    Ok(Outcome::Completed)
 }
 
 fn verdict(name: &str, ratio: f64, target: f64, how: &str) {
@@ -292,7 +294,7 @@ fn loader_options(args: &BenchLoadArgs, threads: usize) -> LoaderOptions {
 }
 
 /// The hidden `--worker MODE`: one epoch in this process, a JSON line on stdout.
-fn worker(mode: &str, dataset: &Path, args: &BenchLoadArgs, threads: usize) -> Result<ExitStatus> {
+fn worker(mode: &str, dataset: &Path, args: &BenchLoadArgs, threads: usize) -> Result<Outcome> {
     let mut opts = loader_options(args, threads);
     match mode {
         "random" => {}
@@ -339,7 +341,7 @@ fn worker(mode: &str, dataset: &Path, args: &BenchLoadArgs, threads: usize) -> R
             "seconds": seconds, "bytes_read": loader.bytes_read(), "shape": shape,
         })
     );
-    Ok(ExitStatus::Success)
+    Ok(Outcome::Completed)
 }
 
 /// Runs a worker as a child process and measures it.

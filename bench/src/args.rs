@@ -1,0 +1,109 @@
+//! The flags of `scaledp bench`, one struct per benchmark.
+
+use std::path::PathBuf;
+
+use clap::{Args, Subcommand, ValueEnum};
+
+/// Chunk compression of the recorder under test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Compression {
+    /// No compression.
+    None,
+    /// LZ4 (fast).
+    Lz4,
+    /// Zstandard level 1 (smaller).
+    Zstd,
+}
+
+/// `scaledp bench`.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Publish the reference load over loopback into a recorder process and report drops and CPU.
+    Record(BenchRecordArgs),
+    /// Convert a fixed generated set of recordings and report frames/s, MB/s and peak memory,
+    /// against the usual single-process Python route.
+    Convert(BenchConvertArgs),
+    /// Run the training-data loader over a generated bimanual dataset and report samples/s,
+    /// images/s, MB/s and peak memory against pure JPEG decoding and LeRobot's DataLoader.
+    Load(BenchLoadArgs),
+}
+
+/// `scaledp bench load`.
+#[derive(Debug, Args)]
+pub struct BenchLoadArgs {
+    /// Episodes of the generated dataset (bimanual_ur5_3rs, 3 cameras stored as 320×240 JPEG).
+    #[arg(long, default_value_t = 100)]
+    pub episodes: usize,
+    /// Seconds per episode (frames at the rig's 10 Hz control rate).
+    #[arg(long, default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Samples per batch.
+    #[arg(long, default_value_t = 64)]
+    pub batch_size: usize,
+    /// Decoding threads of the loader and of the pure-decode run, and LeRobot's DataLoader
+    /// workers (default: the number of cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Cache directory for the generated datasets, reused when complete (default: target/bench-load
+    /// beside the executable, else a directory in the system temp dir).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// The streaming run uses a dataset this many times larger (the generated one merged with
+    /// itself under new episode indices); 0 skips the streaming run.
+    #[arg(long, default_value_t = 4)]
+    pub streaming_factor: usize,
+    /// Episodes open at once in streaming mode.
+    #[arg(long, default_value_t = 16)]
+    pub streaming_buffer: usize,
+    /// Batches LeRobot's DataLoader is timed over (after one warm-up batch).
+    #[arg(long, default_value_t = 20)]
+    pub lerobot_batches: usize,
+    /// Skip the Python routes (LeRobot's DataLoader and our module `scaledp_data`).
+    #[arg(long, alias = "no-lerobot")]
+    pub no_python: bool,
+    /// Internal: run one loader epoch over DATASET in this process and print JSON
+    /// (`random` or `streaming`); the benchmark measures it as a child process.
+    #[arg(long, hide = true, value_name = "MODE", requires = "dataset")]
+    pub worker: Option<String>,
+    /// Internal: the dataset of a --worker run.
+    #[arg(long, hide = true)]
+    pub dataset: Option<PathBuf>,
+}
+
+/// `scaledp bench convert`.
+#[derive(Debug, Args)]
+pub struct BenchConvertArgs {
+    /// Episodes generated and converted.
+    #[arg(long, default_value_t = 4)]
+    pub episodes: usize,
+    /// Seconds per episode.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Rig file, or the name of a shipped rig.
+    #[arg(long, default_value = "franka_2zed")]
+    pub rig: String,
+    /// Episodes converted at once (default: the number of cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Keep the generated recordings and the datasets here (default: a temporary directory,
+    /// removed afterwards).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Skip the Python baseline.
+    #[arg(long)]
+    pub no_python: bool,
+}
+
+/// `scaledp bench record`.
+#[derive(Debug, Args)]
+pub struct BenchRecordArgs {
+    /// Seconds of load.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Chunk compression of the recorder.
+    #[arg(long, value_enum, default_value = "lz4")]
+    pub compression: Compression,
+    /// Where the recording goes (default: a temporary directory, removed afterwards).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
