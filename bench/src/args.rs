@@ -4,17 +4,6 @@ use std::path::PathBuf;
 
 use clap::{Args, Subcommand, ValueEnum};
 
-/// Chunk compression of the recorder under test.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Compression {
-    /// No compression.
-    None,
-    /// LZ4 (fast).
-    Lz4,
-    /// Zstandard level 1 (smaller).
-    Zstd,
-}
-
 /// `scaledp bench`.
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -28,46 +17,40 @@ pub enum BenchCommand {
     Load(BenchLoadArgs),
 }
 
-/// `scaledp bench load`.
+/// Chunk compression of the recorder under test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Compression {
+    /// No compression.
+    None,
+    /// LZ4 (fast).
+    Lz4,
+    /// Zstandard level 1 (smaller).
+    Zstd,
+}
+
+impl Compression {
+    /// The value of `scaledp record --compression`.
+    pub fn flag(self) -> &'static str {
+        match self {
+            Compression::None => "none",
+            Compression::Lz4 => "lz4",
+            Compression::Zstd => "zstd",
+        }
+    }
+}
+
+/// `scaledp bench record`.
 #[derive(Debug, Args)]
-pub struct BenchLoadArgs {
-    /// Episodes of the generated dataset (bimanual_ur5_3rs, 3 cameras stored as 320×240 JPEG).
-    #[arg(long, default_value_t = 100)]
-    pub episodes: usize,
-    /// Seconds per episode (frames at the rig's 10 Hz control rate).
-    #[arg(long, default_value_t = 20.0)]
+pub struct BenchRecordArgs {
+    /// Seconds of load.
+    #[arg(long, default_value_t = 10.0)]
     pub seconds: f64,
-    /// Samples per batch.
-    #[arg(long, default_value_t = 64)]
-    pub batch_size: usize,
-    /// Decoding threads of the loader and of the pure-decode run, and LeRobot's DataLoader
-    /// workers (default: the number of cores).
+    /// Chunk compression of the recorder.
+    #[arg(long, value_enum, default_value = "lz4")]
+    pub compression: Compression,
+    /// Where the recording goes (default: a temporary directory, removed afterwards).
     #[arg(long)]
-    pub threads: Option<usize>,
-    /// Cache directory for the generated datasets, reused when complete (default: target/bench-load
-    /// beside the executable, else a directory in the system temp dir).
-    #[arg(long)]
-    pub dir: Option<PathBuf>,
-    /// The streaming run uses a dataset this many times larger (the generated one merged with
-    /// itself under new episode indices); 0 skips the streaming run.
-    #[arg(long, default_value_t = 4)]
-    pub streaming_factor: usize,
-    /// Episodes open at once in streaming mode.
-    #[arg(long, default_value_t = 16)]
-    pub streaming_buffer: usize,
-    /// Batches LeRobot's DataLoader is timed over (after one warm-up batch).
-    #[arg(long, default_value_t = 20)]
-    pub lerobot_batches: usize,
-    /// Skip the Python routes (LeRobot's DataLoader and our module `scaledp_data`).
-    #[arg(long, alias = "no-lerobot")]
-    pub no_python: bool,
-    /// Internal: run one loader epoch over DATASET in this process and print JSON
-    /// (`random` or `streaming`); the benchmark measures it as a child process.
-    #[arg(long, hide = true, value_name = "MODE", requires = "dataset")]
-    pub worker: Option<String>,
-    /// Internal: the dataset of a --worker run.
-    #[arg(long, hide = true)]
-    pub dataset: Option<PathBuf>,
+    pub out: Option<PathBuf>,
 }
 
 /// `scaledp bench convert`.
@@ -92,18 +75,122 @@ pub struct BenchConvertArgs {
     /// Skip the Python baseline.
     #[arg(long)]
     pub no_python: bool,
+    /// The Python of the baseline, with rosbags, numpy, Pillow and pyarrow (default:
+    /// $SCALEDP_PYTHON, else .venv/bin/python in the workspace holding the current directory,
+    /// which `bash scripts/setup-python.sh` makes).
+    #[arg(long, value_name = "PYTHON")]
+    pub python: Option<PathBuf>,
 }
 
-/// `scaledp bench record`.
+/// `scaledp bench load`.
 #[derive(Debug, Args)]
-pub struct BenchRecordArgs {
-    /// Seconds of load.
-    #[arg(long, default_value_t = 10.0)]
+pub struct BenchLoadArgs {
+    /// Episodes of the generated dataset (bimanual_ur5_3rs, 3 cameras stored as 320×240 JPEG).
+    #[arg(long, default_value_t = 100)]
+    pub episodes: usize,
+    /// Seconds per episode (frames at the rig's 10 Hz control rate).
+    #[arg(long, default_value_t = 20.0)]
     pub seconds: f64,
-    /// Chunk compression of the recorder.
-    #[arg(long, value_enum, default_value = "lz4")]
-    pub compression: Compression,
-    /// Where the recording goes (default: a temporary directory, removed afterwards).
+    /// Samples per batch.
+    #[arg(long, default_value_t = 64)]
+    pub batch_size: usize,
+    /// Decoding threads of the loader and of the pure-decode run, and LeRobot's DataLoader
+    /// workers (default: the number of cores).
     #[arg(long)]
-    pub out: Option<PathBuf>,
+    pub threads: Option<usize>,
+    /// Cache directory for the generated datasets, reused when complete (default:
+    /// target/bench-load in the workspace holding the current directory, else a directory in
+    /// the system temp dir).
+    #[arg(long)]
+    pub dir: Option<PathBuf>,
+    /// The streaming run uses a dataset this many times larger (the generated one merged with
+    /// itself under new episode indices); 0 skips the streaming run.
+    #[arg(long, default_value_t = 4)]
+    pub streaming_factor: usize,
+    /// Episodes open at once in streaming mode.
+    #[arg(long, default_value_t = 16)]
+    pub streaming_buffer: usize,
+    /// Batches LeRobot's DataLoader is timed over (after one warm-up batch).
+    #[arg(long, default_value_t = 20)]
+    pub lerobot_batches: usize,
+    /// Skip the Python routes (LeRobot's DataLoader and our module `scaledp_data`).
+    #[arg(long, alias = "no-lerobot")]
+    pub no_python: bool,
+    /// The Python of both routes, with LeRobot and torch (default: $SCALEDP_BENCH_PYTHON, else
+    /// .venv-bench/bin/python in the workspace holding the current directory, which
+    /// `bash scripts/setup-bench-python.sh` makes). The scaledp_data wheel comes from
+    /// $SCALEDP_WHEEL_DIR, else that workspace's target/wheels (`bash scripts/build-python.sh`).
+    #[arg(long, value_name = "PYTHON")]
+    pub python: Option<PathBuf>,
+    /// Internal: run one loader epoch over DATASET in this process and print JSON; the
+    /// benchmark measures it as a child process.
+    #[arg(
+        long,
+        hide = true,
+        value_enum,
+        value_name = "MODE",
+        requires = "dataset"
+    )]
+    pub worker: Option<WorkerMode>,
+    /// Internal: the dataset of a --worker run.
+    #[arg(long, hide = true)]
+    pub dataset: Option<PathBuf>,
+}
+
+/// How the loader epoch of a `bench load --worker` child reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WorkerMode {
+    /// Random access: any sample of the dataset at any time.
+    Random,
+    /// Whole episodes, `--streaming-buffer` open at a time.
+    Streaming,
+}
+
+impl WorkerMode {
+    /// The value of `--worker`.
+    pub fn flag(self) -> &'static str {
+        match self {
+            WorkerMode::Random => "random",
+            WorkerMode::Streaming => "streaming",
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        bench: BenchCommand,
+    }
+
+    #[test]
+    fn the_flags_hold_together() {
+        Cli::command().debug_assert();
+        let cli = Cli::try_parse_from(["bench", "load", "--worker", "streaming", "--dataset", "d"])
+            .expect("a worker command line");
+        assert!(matches!(
+            cli.bench,
+            BenchCommand::Load(BenchLoadArgs {
+                worker: Some(WorkerMode::Streaming),
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn what_a_child_is_passed_is_what_its_parser_takes() {
+        for c in Compression::value_variants() {
+            let name = c.to_possible_value().map(|v| v.get_name().to_string());
+            assert_eq!(name.as_deref(), Some(c.flag()));
+        }
+        for m in WorkerMode::value_variants() {
+            let name = m.to_possible_value().map(|v| v.get_name().to_string());
+            assert_eq!(name.as_deref(), Some(m.flag()));
+        }
+    }
 }

@@ -3,23 +3,25 @@
 //! its wall time and peak memory are its own); then the very JPEGs of that epoch's samples are
 //! decoded with nothing else around them on a pool of the same size (the physical limit; and
 //! once more with the loader's own decoder, which also lays pixels out channel-first); then
-//! LeRobot's `LeRobotDataset` + torch `DataLoader` reads the same files
-//! (`tests/py/lerobot_baseline.py`); then a streaming epoch runs over a dataset several times
-//! larger, for its peak memory.
-
-use std::path::Path;
-use std::process::Command as Process;
-use std::time::Instant;
-
-use anyhow::{bail, Context, Result};
-use scaledp_datasets::LoaderOptions;
+//! our loader from Python (`scaledp_data`) and LeRobot's `LeRobotDataset` + torch `DataLoader`
+//! read the same files; then a streaming epoch runs over a dataset several times larger, for
+//! its peak memory.
 
 mod data;
+mod decode;
+mod worker;
 
-use crate::convert::{dir_bytes, measure, Measured};
-use crate::python::{run_lerobot, run_module};
-use crate::{BenchLoadArgs, Outcome};
-use data::{ensure_dataset, ensure_larger, pure_decode, DataSpec};
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use scaledp_testkit::{load_average, workspace_from_current_dir, Measured, BENCH_VENV};
+
+use crate::disk::dir_bytes;
+use crate::python::{run_lerobot, run_module, LeRobotRun, LoadRoute, ModuleRun, NotRun, Python};
+use crate::{BenchLoadArgs, Outcome, WorkerMode};
+use data::{ensure_dataset, ensure_larger, DataSpec};
+use decode::{pure_decode, PureDecode};
+use worker::EpochReport;
 
 const OBS_HORIZON: usize = 2;
 const ACTION_CHUNK: usize = 16;
@@ -30,16 +32,20 @@ const TARGET_LEROBOT_RATIO: f64 = 5.0;
 /// Peak resident memory of the streaming run (bytes).
 const TARGET_STREAMING_RSS: u64 = 2_000_000_000;
 
-/// What a worker (one loader epoch) reports on its last stdout line.
-#[derive(serde::Deserialize)]
-struct EpochReport {
-    samples: u64,
-    batches: u64,
-    images: u64,
-    open_s: f64,
-    seconds: f64,
-    bytes_read: u64,
-    shape: String,
+/// Everything one run measured.
+struct Runs {
+    threads: usize,
+    cores: usize,
+    how: String,
+    dataset: PathBuf,
+    data_bytes: u64,
+    load_before: Option<f64>,
+    ours: (Measured, EpochReport),
+    pure: PureDecode,
+    module: Result<ModuleRun, NotRun>,
+    lerobot: Result<LeRobotRun, NotRun>,
+    /// The streaming epoch, the bytes of its dataset and how that was made.
+    streaming: Option<((Measured, EpochReport), u64, String)>,
 }
 
 /// One row of the table.
@@ -55,12 +61,12 @@ struct Row {
 pub fn run(args: BenchLoadArgs) -> Result<Outcome> {
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
     let threads = args.threads.unwrap_or(cores).max(1);
-    if let Some(mode) = &args.worker {
+    if let Some(mode) = args.worker {
         let dataset = args
             .dataset
             .as_deref()
             .context("--worker needs --dataset")?;
-        return worker(mode, dataset, &args, threads);
+        return worker::run(mode, dataset, &args, threads);
     }
     if args.episodes == 0 || !args.seconds.is_finite() || args.seconds <= 0.0 {
         bail!("need --episodes >= 1 and --seconds > 0");
@@ -68,15 +74,24 @@ pub fn run(args: BenchLoadArgs) -> Result<Outcome> {
     if args.batch_size == 0 {
         bail!("need --batch-size >= 1");
     }
-    let exe = std::env::current_exe().context("locating the scaledp executable")?;
-    let cache = match &args.dir {
-        Some(d) => d.clone(),
-        None => exe
-            .ancestors()
-            .find(|d| d.file_name().is_some_and(|n| n == "target"))
-            .map_or_else(std::env::temp_dir, Path::to_path_buf)
-            .join("bench-load"),
-    };
+    let runs = measure_all(&args, cores, threads)?;
+    print_report(&args, &runs);
+    Ok(Outcome::Completed)
+}
+
+/// `--dir`, else `target/bench-load` in the workspace holding the current directory, else a
+/// directory in the system's temp dir.
+fn cache_dir(args: &BenchLoadArgs) -> PathBuf {
+    match (&args.dir, workspace_from_current_dir()) {
+        (Some(d), _) => d.clone(),
+        (None, Ok(root)) => root.join("target/bench-load"),
+        (None, Err(_)) => std::env::temp_dir().join("scaledp-bench-load"),
+    }
+}
+
+/// Generates (or reuses) the datasets and runs every route.
+fn measure_all(args: &BenchLoadArgs, cores: usize, threads: usize) -> Result<Runs> {
+    let cache = cache_dir(args);
     let spec = DataSpec {
         episodes: args.episodes,
         seconds: args.seconds,
@@ -84,98 +99,82 @@ pub fn run(args: BenchLoadArgs) -> Result<Outcome> {
     };
     let (dataset, how) = ensure_dataset(&cache, &spec)?;
     let data_bytes = dir_bytes(&dataset.join("data"))?;
-
     // 1. One random-access epoch in a child process.
     let load_before = load_average();
-    let ours = run_worker(&exe, "random", &dataset, &args, threads)?;
+    let ours = worker::spawn(WorkerMode::Random, &dataset, args, threads)?;
     // 2. The same JPEGs, decoded with nothing else around them.
     tracing::info!("decoding the epoch's JPEGs on {threads} threads");
     let pure = pure_decode(&dataset, OBS_HORIZON, threads)?;
-    let (decoded, decode_s) = (pure.images, pure.zune.seconds);
     // 3. Our loader from Python, and LeRobot, on the same files.
-    let (module, lerobot) = if args.no_python {
-        let no = "--no-python".to_string();
-        (Err(no.clone()), Err(no))
-    } else {
-        (
-            run_module(&exe, &dataset, &cache, &args, threads),
-            run_lerobot(&exe, &dataset, &cache, &args, threads),
-        )
-    };
+    let (module, lerobot) = python_routes(args, &dataset, &cache, threads);
     // 4. Streaming over a larger dataset.
     let streaming = if args.streaming_factor == 0 {
         None
     } else {
         let (large, large_how) = ensure_larger(&cache, &dataset, &spec, args.streaming_factor)?;
-        let r = run_worker(&exe, "streaming", &large, &args, threads)?;
+        let r = worker::spawn(WorkerMode::Streaming, &large, args, threads)?;
         Some((r, dir_bytes(&large.join("data"))?, large_how))
     };
+    Ok(Runs {
+        threads,
+        cores,
+        how,
+        dataset,
+        data_bytes,
+        load_before,
+        ours,
+        pure,
+        module,
+        lerobot,
+        streaming,
+    })
+}
 
+/// The `scaledp_data` and LeRobot routes on the benchmark Python.
+fn python_routes(
+    args: &BenchLoadArgs,
+    dataset: &Path,
+    cache: &Path,
+    threads: usize,
+) -> (Result<ModuleRun, NotRun>, Result<LeRobotRun, NotRun>) {
+    if args.no_python {
+        return (Err(NotRun::Skipped), Err(NotRun::Skipped));
+    }
+    let py = match Python::locate(&BENCH_VENV, args.python.as_deref()) {
+        Ok(py) => py,
+        Err(why) => return (Err(why.clone()), Err(why)),
+    };
+    let route = LoadRoute {
+        dataset,
+        cache,
+        batch_size: args.batch_size,
+        threads,
+        lerobot_batches: args.lerobot_batches,
+    };
+    (run_module(&py, &route), run_lerobot(&py, &route))
+}
+
+fn print_report(args: &BenchLoadArgs, runs: &Runs) {
+    let threads = runs.threads;
+    let report = &runs.ours.1;
     println!(
         "scaledp bench load: {} ({:.0} MB of parquet in {})",
-        how,
-        data_bytes as f64 / 1e6,
-        dataset.display()
+        runs.how,
+        runs.data_bytes as f64 / 1e6,
+        runs.dataset.display()
     );
     println!(
         "samples: To {OBS_HORIZON}, C {ACTION_CHUNK}, batch {}, shuffled; {}",
-        args.batch_size, ours.1.shape
+        args.batch_size, report.shape
     );
+    let load = |l: Option<f64>| l.map_or("n/a".into(), |l| format!("{l:.2}"));
     println!(
-        "cores: {cores} available; loader threads {threads}; pure decode: zune-jpeg on a rayon pool of {threads}; 1-min load average {load_before} before the runs, {} after",
-        load_average()
+        "cores: {} available; loader threads {threads}; pure decode: zune-jpeg on a rayon pool of {threads}; 1-min load average {} before the runs, {} after",
+        runs.cores,
+        load(runs.load_before),
+        load(load_average())
     );
-    let cams = ours.1.images / (ours.1.samples * OBS_HORIZON as u64).max(1);
-    let mut rows = vec![worker_row("scaledp loader", &ours)];
-    rows.push(Row {
-        route: format!("pure JPEG decode ×{threads}"),
-        samples: None,
-        images: Some(decoded),
-        seconds: decode_s,
-        bytes: None,
-        peak_rss: None,
-    });
-    rows.push(Row {
-        route: format!("decode + CHW ×{threads}"),
-        samples: None,
-        images: Some(decoded),
-        seconds: pure.chw.seconds,
-        bytes: None,
-        peak_rss: None,
-    });
-    if let Ok(r) = &module {
-        rows.push(Row {
-            route: "scaledp_data (Python)".into(),
-            samples: Some(r.samples),
-            images: Some(r.images),
-            seconds: r.seconds,
-            bytes: None,
-            peak_rss: r.m.peak_rss,
-        });
-    }
-    let lerobot_rate = match &lerobot {
-        Ok(r) => {
-            rows.push(Row {
-                route: "LeRobot DataLoader".into(),
-                samples: Some(r.samples),
-                images: Some(r.samples * OBS_HORIZON as u64 * cams),
-                seconds: r.seconds,
-                bytes: None,
-                peak_rss: r.m.peak_rss,
-            });
-            Some(r.samples as f64 / r.seconds)
-        }
-        Err(_) => None,
-    };
-    if let Some((r, _, _)) = &streaming {
-        let route = format!("loader streaming ×{}", args.streaming_factor);
-        rows.push(worker_row(&route, r));
-    }
-    print_table(&rows);
-
-    let report = &ours.1;
-    let ours_images_s = report.images as f64 / report.seconds;
-    let decode_images_s = decoded as f64 / decode_s;
+    print_table(&rows(args, runs));
     println!(
         "loader: opened in {:.2} s, then {} batches in {:.2} s; MB/s read = bytes of parquet pages and footers the loader actually read ({:.0} MB) / epoch seconds",
         report.open_s,
@@ -183,46 +182,9 @@ pub fn run(args: BenchLoadArgs) -> Result<Outcome> {
         report.seconds,
         report.bytes_read as f64 / 1e6
     );
-    verdict(
-        "decode ratio",
-        ours_images_s / decode_images_s,
-        TARGET_DECODE_RATIO,
-        &format!(
-            "loader images/s {ours_images_s:.0} ÷ pure-decode images/s {decode_images_s:.0} ({decoded} JPEGs, the epoch's To × cams per sample)"
-        ),
-    );
-    if let (Some(loader_cpu), Some(zune_cpu), Some(chw_cpu)) =
-        (ours.0.cpu_s, pure.zune.cpu_s, pure.chw.cpu_s)
-    {
-        // Wall-clock rates suffer from whatever else runs on the machine; CPU seconds much less.
-        println!(
-            "on CPU seconds (less sensitive to other load; not the target's measure): the loader process spent {loader_cpu:.1} s for these images, pure decode {zune_cpu:.1} s ({:.2}×), the loader's decoder with its channel-first layout {chw_cpu:.1} s ({:.2}×)",
-            zune_cpu / loader_cpu,
-            chw_cpu / loader_cpu
-        );
-    }
-    match &module {
-        Ok(r) => println!(
-            "from Python: scaledp_data.Loader, each batch dropped before the next, {:.0} images/s = {:.2}× pure decode",
-            r.images as f64 / r.seconds,
-            r.images as f64 / r.seconds / decode_images_s
-        ),
-        Err(why) => println!("scaledp_data from Python: not run — {why}"),
-    }
-    match (&lerobot, lerobot_rate) {
-        (Ok(r), Some(rate)) => verdict(
-            "vs LeRobot",
-            report.samples as f64 / report.seconds / rate,
-            TARGET_LEROBOT_RATIO,
-            &format!(
-                "samples/s of ours over lerobot {} LeRobotDataset + torch DataLoader ({threads} workers, shuffled, {} batches timed by its own clock after a warm-up batch of {:.1} s; dataset opened in {:.1} s; peak RSS of its main process only, workers not counted)",
-                r.version, args.lerobot_batches, r.warmup_s, r.init_s
-            ),
-        ),
-        (Err(why), _) => println!("LeRobot baseline: none, so no ratio — {why}"),
-        (Ok(_), None) => {}
-    }
-    if let Some((r, bytes, large_how)) = &streaming {
+    print_decode_verdict(runs);
+    print_python_verdicts(args, runs);
+    if let Some((r, bytes, large_how)) = &runs.streaming {
         let rss = r.0.peak_rss;
         let met = rss.is_some_and(|b| b <= TARGET_STREAMING_RSS);
         println!(
@@ -234,14 +196,54 @@ pub fn run(args: BenchLoadArgs) -> Result<Outcome> {
             if met { "met" } else { "NOT met" }
         );
     }
-    Ok(Outcome::Completed)
 }
 
-fn verdict(name: &str, ratio: f64, target: f64, how: &str) {
-    println!(
-        "{name}: {ratio:.2}× ; target ≥ {target}×: {} — {how}",
-        if ratio >= target { "met" } else { "NOT met" }
-    );
+/// The table's rows: every route that ran.
+fn rows(args: &BenchLoadArgs, runs: &Runs) -> Vec<Row> {
+    let (threads, pure) = (runs.threads, &runs.pure);
+    let decode_row = |route: String, seconds: f64| Row {
+        route,
+        samples: None,
+        images: Some(pure.images),
+        seconds,
+        bytes: None,
+        peak_rss: None,
+    };
+    let mut rows = vec![
+        worker_row("scaledp loader", &runs.ours),
+        decode_row(format!("pure JPEG decode ×{threads}"), pure.zune.seconds),
+        decode_row(format!("decode + CHW ×{threads}"), pure.chw.seconds),
+    ];
+    if let Ok(r) = &runs.module {
+        rows.push(Row {
+            route: "scaledp_data (Python)".into(),
+            samples: Some(r.samples),
+            images: Some(r.images),
+            seconds: r.seconds,
+            bytes: None,
+            peak_rss: r.m.peak_rss,
+        });
+    }
+    if let Ok(r) = &runs.lerobot {
+        rows.push(Row {
+            route: "LeRobot DataLoader".into(),
+            samples: Some(r.samples),
+            images: Some(r.samples * OBS_HORIZON as u64 * cameras(&runs.ours.1)),
+            seconds: r.seconds,
+            bytes: None,
+            peak_rss: r.m.peak_rss,
+        });
+    }
+    if let Some((r, _, _)) = &runs.streaming {
+        let route = format!("loader streaming ×{}", args.streaming_factor);
+        rows.push(worker_row(&route, r));
+    }
+    rows
+}
+
+/// Cameras per sample, from the loader's counts.
+fn cameras(r: &EpochReport) -> u64 {
+    r.images / (r.samples * OBS_HORIZON as u64).max(1)
 }
 
 fn worker_row(route: &str, r: &(Measured, EpochReport)) -> Row {
@@ -275,106 +277,61 @@ fn print_table(rows: &[Row]) {
     }
 }
 
-/// The 1-minute load average, as text.
-fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().map(str::to_string))
-        .unwrap_or_else(|| "n/a".into())
-}
-
-fn loader_options(args: &BenchLoadArgs, threads: usize) -> LoaderOptions {
-    LoaderOptions::default()
-        .obs_horizon(OBS_HORIZON)
-        .action_chunk(ACTION_CHUNK)
-        .batch_size(args.batch_size)
-        .shuffle(true)
-        .seed(0)
-        .threads(threads)
-}
-
-/// The hidden `--worker MODE`: one epoch in this process, a JSON line on stdout.
-fn worker(mode: &str, dataset: &Path, args: &BenchLoadArgs, threads: usize) -> Result<Outcome> {
-    let mut opts = loader_options(args, threads);
-    match mode {
-        "random" => {}
-        "streaming" => opts = opts.streaming(args.streaming_buffer),
-        other => bail!("unknown worker mode {other} (random, streaming)"),
-    }
-    let location = dataset.to_string_lossy();
-    let t0 = Instant::now();
-    let mut loader = opts
-        .open(&location)
-        .with_context(|| format!("opening {}", dataset.display()))?;
-    let open_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-    let (mut samples, mut batches, mut images, mut shape) = (0u64, 0u64, 0u64, String::new());
-    while let Some(batch) = loader.next_batch() {
-        let b = batch?;
-        let cams = b.cameras.len();
-        if shape.is_empty() {
-            shape = format!(
-                "images [{}, {}, {cams}, 3, {}, {}] u8, state [{}, {}, {}] f32, action [{}, {}, {}] f32",
-                b.len, b.obs_horizon, b.height, b.width, b.len, b.obs_horizon, b.state_dim, b.len,
-                b.action_chunk, b.action_dim
-            );
-        }
-        let plane = 3 * b.height as usize * b.width as usize;
-        if b.images.len() != b.len * b.obs_horizon * cams * plane {
-            bail!(
-                "batch {batches}: {} image bytes for {} samples",
-                b.images.len(),
-                b.len
-            );
-        }
-        samples += b.len as u64;
-        images += (b.len * b.obs_horizon * cams) as u64;
-        batches += 1;
-        // What a Rust trainer does once the batch is on the device.
-        loader.recycle(b);
-    }
-    let seconds = t1.elapsed().as_secs_f64();
+fn verdict(name: &str, ratio: f64, target: f64, how: &str) {
     println!(
-        "{}",
-        serde_json::json!({
-            "samples": samples, "batches": batches, "images": images, "open_s": open_s,
-            "seconds": seconds, "bytes_read": loader.bytes_read(), "shape": shape,
-        })
+        "{name}: {ratio:.2}× ; target ≥ {target}×: {} — {how}",
+        if ratio >= target { "met" } else { "NOT met" }
     );
-    Ok(Outcome::Completed)
 }
 
-/// Runs a worker as a child process and measures it.
-fn run_worker(
-    exe: &Path,
-    mode: &str,
-    dataset: &Path,
-    args: &BenchLoadArgs,
-    threads: usize,
-) -> Result<(Measured, EpochReport)> {
-    let mut cmd = Process::new(exe);
-    cmd.args(["bench", "load", "--worker", mode, "--dataset"])
-        .arg(dataset)
-        .args(["--batch-size", &args.batch_size.to_string()])
-        .args(["--threads", &threads.to_string()])
-        .args(["--streaming-buffer", &args.streaming_buffer.to_string()]);
-    tracing::info!("running {cmd:?}");
-    let m = measure(cmd, None).with_context(|| format!("running the {mode} loader epoch"))?;
-    if !m.status.success() {
-        bail!(
-            "the {mode} loader epoch exited with {}: {}",
-            m.status,
-            m.stderr.last().map_or("", String::as_str)
+/// Loader images/s over pure decode, and the same on CPU seconds.
+fn print_decode_verdict(runs: &Runs) {
+    let (report, pure) = (&runs.ours.1, &runs.pure);
+    let ours_images_s = report.images as f64 / report.seconds;
+    let decode_images_s = pure.images as f64 / pure.zune.seconds;
+    verdict(
+        "decode ratio",
+        ours_images_s / decode_images_s,
+        TARGET_DECODE_RATIO,
+        &format!(
+            "loader images/s {ours_images_s:.0} ÷ pure-decode images/s {decode_images_s:.0} ({} JPEGs, the epoch's To × cams per sample)",
+            pure.images
+        ),
+    );
+    if let (Some(loader_cpu), Some(zune_cpu), Some(chw_cpu)) =
+        (runs.ours.0.cpu_s, pure.zune.cpu_s, pure.chw.cpu_s)
+    {
+        // Wall-clock rates suffer from whatever else runs on the machine; CPU seconds much less.
+        println!(
+            "on CPU seconds (less sensitive to other load; not the target's measure): the loader process spent {loader_cpu:.1} s for these images, pure decode {zune_cpu:.1} s ({:.2}×), the loader's decoder with its channel-first layout {chw_cpu:.1} s ({:.2}×)",
+            zune_cpu / loader_cpu,
+            chw_cpu / loader_cpu
         );
     }
-    let last = m
-        .stdout
-        .last()
-        .context("the loader epoch printed nothing")?;
-    let report: EpochReport =
-        serde_json::from_str(last).with_context(|| format!("bad worker output '{last}'"))?;
-    if report.samples == 0 || report.seconds <= 0.0 {
-        bail!("the {mode} loader epoch yielded no samples");
+}
+
+/// The `scaledp_data` line and the LeRobot ratio, or why they did not run.
+fn print_python_verdicts(args: &BenchLoadArgs, runs: &Runs) {
+    let (report, threads) = (&runs.ours.1, runs.threads);
+    let decode_images_s = runs.pure.images as f64 / runs.pure.zune.seconds;
+    match &runs.module {
+        Ok(r) => println!(
+            "from Python: scaledp_data.Loader, each batch dropped before the next, {:.0} images/s = {:.2}× pure decode",
+            r.images as f64 / r.seconds,
+            r.images as f64 / r.seconds / decode_images_s
+        ),
+        Err(why) => println!("scaledp_data from Python: not run — {why}"),
     }
-    Ok((m, report))
+    match &runs.lerobot {
+        Ok(r) => verdict(
+            "vs LeRobot",
+            report.samples as f64 / report.seconds / (r.samples as f64 / r.seconds),
+            TARGET_LEROBOT_RATIO,
+            &format!(
+                "samples/s of ours over lerobot {} LeRobotDataset + torch DataLoader ({threads} workers, shuffled, {} batches timed by its own clock after a warm-up batch of {:.1} s; dataset opened in {:.1} s; peak RSS of its main process only, workers not counted)",
+                r.version, args.lerobot_batches, r.warmup_s, r.init_s
+            ),
+        ),
+        Err(why) => println!("LeRobot baseline: none, so no ratio — {why}"),
+    }
 }

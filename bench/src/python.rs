@@ -1,24 +1,174 @@
-//! The Python routes of the benchmarks, each a child process: for `bench load`, LeRobot's
-//! `LeRobotDataset` + torch `DataLoader` (`tests/py/lerobot_baseline.py`) and our own loader
-//! through its Python module `scaledp_data` (`tests/py/scaledp_data_epoch.py`, with the wheel
-//! `scripts/build-python.sh` leaves in `target/wheels` unpacked onto `PYTHONPATH`), both run by
-//! the benchmark Python (`.venv-bench`, from `scripts/setup-bench-python.sh`, or
-//! `SCALEDP_BENCH_PYTHON`); for `bench convert`, the helpers that find a Python and run a
-//! script. A route that cannot run returns `Err` with the reason, which the benchmark prints.
+//! The Python routes of the benchmarks, each a child process running a script compiled into
+//! this crate (written to a temporary directory at run time, so nothing depends on where the
+//! executable sits): for `bench convert`, the usual single-process route from recordings to
+//! parquet (`convert_baseline.py`: rosbags + numpy + Pillow + pyarrow, on the tests' Python);
+//! for `bench load`, LeRobot's `LeRobotDataset` + torch `DataLoader` (`lerobot_baseline.py`)
+//! and our own loader through its Python module `scaledp_data` (`scaledp_data_epoch.py`, with
+//! the wheel `scripts/build-python.sh` builds unpacked onto `PYTHONPATH`), both on the
+//! benchmark Python. The interpreter: `--python`, else the venv's variable, else the venv in the
+//! workspace found from the current directory upward (`scaledp_testkit::Venv`). A route that
+//! cannot run says why ([`NotRun`]); the benchmark prints that instead of a figure.
 
+use std::fmt;
 use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 use std::time::Duration;
 
-use crate::convert::{measure, Measured};
-use crate::BenchLoadArgs;
+use scaledp_testkit::{measure, scaledp_data_wheel, workspace_from_current_dir, Measured, Venv};
 
-const LEROBOT_SCRIPT: &str = "tests/py/lerobot_baseline.py";
-const MODULE_SCRIPT: &str = "tests/py/scaledp_data_epoch.py";
-const TIMEOUT: Duration = Duration::from_secs(1800);
+/// A Python route's script, compiled in.
+pub struct Script {
+    name: &'static str,
+    text: &'static str,
+}
+
+/// `bench convert`'s baseline: recordings → parquet, one process.
+const CONVERT_BASELINE: Script = Script {
+    name: "convert_baseline.py",
+    text: include_str!("../../tests/py/convert_baseline.py"),
+};
+/// `bench load`'s LeRobot route.
+const LEROBOT_BASELINE: Script = Script {
+    name: "lerobot_baseline.py",
+    text: include_str!("../../tests/py/lerobot_baseline.py"),
+};
+/// `bench load`'s `scaledp_data` route.
+const MODULE_EPOCH: Script = Script {
+    name: "scaledp_data_epoch.py",
+    text: include_str!("../../tests/py/scaledp_data_epoch.py"),
+};
+
+/// Why a Python route gave no figure.
+#[derive(Clone)]
+pub enum NotRun {
+    /// `--no-python`.
+    Skipped,
+    /// The interpreter or the wheel is missing: what is missing and what to run.
+    NotSetUp(String),
+    /// It ran and failed.
+    Failed(String),
+}
+
+impl fmt::Display for NotRun {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            NotRun::Skipped => write!(f, "--no-python"),
+            NotRun::NotSetUp(why) | NotRun::Failed(why) => write!(f, "{why}"),
+        }
+    }
+}
+
+/// A Python interpreter and a temporary directory for the scripts it runs.
+pub struct Python {
+    exe: PathBuf,
+    /// The workspace holding the current directory, if any (for the wheel).
+    root: Option<PathBuf>,
+    scripts: tempfile::TempDir,
+}
+
+impl Python {
+    /// `venv`'s interpreter, or `explicit`.
+    pub fn locate(venv: &Venv, explicit: Option<&Path>) -> Result<Python, NotRun> {
+        let root = workspace_from_current_dir().ok();
+        let exe = venv
+            .python(explicit, root.as_deref())
+            .map_err(|e| NotRun::NotSetUp(format!("{e} (or pass --python)")))?;
+        let scripts = tempfile::Builder::new()
+            .prefix("scaledp-bench-py")
+            .tempdir()
+            .map_err(|e| NotRun::Failed(format!("a directory for the scripts: {e}")))?;
+        Ok(Python { exe, root, scripts })
+    }
+
+    /// A command running `script` (written out on first use).
+    pub fn command(&self, script: &Script) -> Result<Process, NotRun> {
+        let path = self.scripts.path().join(script.name);
+        if !path.exists() {
+            std::fs::write(&path, script.text)
+                .map_err(|e| NotRun::Failed(format!("writing {}: {e}", path.display())))?;
+        }
+        let mut cmd = Process::new(&self.exe);
+        cmd.arg(path);
+        Ok(cmd)
+    }
+
+    /// Runs `cmd` to the end or `timeout` and parses its last stdout line as JSON.
+    pub fn run_json(
+        &self,
+        cmd: Process,
+        timeout: Duration,
+    ) -> Result<(serde_json::Value, Measured), NotRun> {
+        tracing::info!("running {cmd:?} (timeout {timeout:?})");
+        let failed = |why: String| NotRun::Failed(format!("{}: {why}", self.exe.display()));
+        let m = measure(cmd, Some(timeout)).map_err(|e| NotRun::Failed(e.to_string()))?;
+        if !m.status.success() {
+            let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
+            return Err(failed(format!("exited with {}{why}", m.status)));
+        }
+        let last = m
+            .stdout
+            .last()
+            .ok_or_else(|| failed("printed nothing".into()))?;
+        let v =
+            serde_json::from_str(last).map_err(|e| failed(format!("bad output '{last}': {e}")))?;
+        Ok((v, m))
+    }
+
+    /// The newest `scaledp_data` wheel, unpacked into `site` (a wheel is a zip of the package:
+    /// unpacked, it imports from `PYTHONPATH`).
+    pub fn unpack_wheel(&self, site: &Path) -> Result<(), NotRun> {
+        let wheel = scaledp_data_wheel(None, self.root.as_deref())
+            .map_err(|e| NotRun::NotSetUp(e.to_string()))?;
+        let _ = std::fs::remove_dir_all(site);
+        let unpack = Process::new(&self.exe)
+            .args(["-m", "zipfile", "-e"])
+            .arg(&wheel)
+            .arg(site)
+            .output()
+            .map_err(|e| NotRun::Failed(format!("{}: {e}", self.exe.display())))?;
+        if !unpack.status.success() {
+            return Err(NotRun::Failed(format!(
+                "unpacking {}: {}",
+                wheel.display(),
+                String::from_utf8_lossy(&unpack.stderr).trim()
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What the convert baseline did.
+pub struct ConvertRun {
+    pub frames: u64,
+    /// Its own timer, from after its imports to the end.
+    pub seconds: f64,
+    pub m: Measured,
+}
+
+/// `convert_baseline.py RECORDINGS OUT`, given 2 minutes + twice the recorded time.
+pub fn run_convert_baseline(
+    py: &Python,
+    recordings: &Path,
+    out: &Path,
+    recorded_s: f64,
+) -> Result<ConvertRun, NotRun> {
+    let mut cmd = py.command(&CONVERT_BASELINE)?;
+    cmd.arg(recordings).arg(out);
+    let timeout = Duration::from_secs_f64(120.0 + 2.0 * recorded_s);
+    let (v, m) = py.run_json(cmd, timeout)?;
+    match (v["frames"].as_u64(), v["seconds"].as_f64()) {
+        (Some(frames), Some(seconds)) if frames > 0 && seconds > 0.0 => {
+            Ok(ConvertRun { frames, seconds, m })
+        }
+        _ => Err(NotRun::Failed(format!("bad baseline output {v}"))),
+    }
+}
+
+/// Time limit of the `bench load` routes.
+const LOAD_TIMEOUT: Duration = Duration::from_secs(1800);
 
 /// What the LeRobot route did.
-pub(crate) struct LeRobotRun {
+pub struct LeRobotRun {
     pub version: String,
     pub samples: u64,
     pub seconds: f64,
@@ -28,98 +178,35 @@ pub(crate) struct LeRobotRun {
 }
 
 /// What the `scaledp_data` route did.
-pub(crate) struct ModuleRun {
+pub struct ModuleRun {
     pub samples: u64,
     pub images: u64,
     pub seconds: f64,
     pub m: Measured,
 }
 
-/// Where a route finds its Python: `env` if set, else `venv` (relative to the workspace),
-/// whose absence `hint` explains.
-pub(crate) struct PythonFor {
-    pub env: &'static str,
-    pub venv: &'static str,
-    pub hint: &'static str,
+/// What `bench load` asks of its Python routes.
+pub struct LoadRoute<'a> {
+    pub dataset: &'a Path,
+    /// Scratch space (the HF home, the unpacked wheel).
+    pub cache: &'a Path,
+    pub batch_size: usize,
+    /// DataLoader workers / loader threads.
+    pub threads: usize,
+    /// Batches LeRobot's DataLoader is timed over.
+    pub lerobot_batches: usize,
 }
 
-const BENCH_PYTHON: PythonFor = PythonFor {
-    env: "SCALEDP_BENCH_PYTHON",
-    venv: ".venv-bench/bin/python",
-    hint: "run scripts/setup-bench-python.sh, or set SCALEDP_BENCH_PYTHON",
-};
-
-/// The workspace (the directory holding `script`) and the Python to run it with.
-pub(crate) fn python(
-    exe: &Path,
-    script: &str,
-    which: &PythonFor,
-) -> Result<(PathBuf, PathBuf), String> {
-    let cwd = std::env::current_dir().unwrap_or_default();
-    let workspace = exe
-        .ancestors()
-        .chain(cwd.ancestors())
-        .find(|d| d.join(script).is_file())
-        .ok_or_else(|| {
-            format!(
-                "{script} not found above {} or the current directory",
-                exe.display()
-            )
-        })?
-        .to_path_buf();
-    let python = match std::env::var_os(which.env) {
-        Some(p) => PathBuf::from(p),
-        None => {
-            let venv = workspace.join(which.venv);
-            if !venv.exists() {
-                return Err(format!("no {} ({})", venv.display(), which.hint));
-            }
-            venv
-        }
-    };
-    Ok((workspace, python))
-}
-
-/// Runs `cmd` (a script of `python`) to the end or `timeout`, and parses its last stdout line
-/// as JSON.
-pub(crate) fn run_json(
-    python: &Path,
-    cmd: Process,
-    timeout: Duration,
-) -> Result<(serde_json::Value, Measured), String> {
-    tracing::info!("running {cmd:?} (timeout {timeout:?})");
-    let m = measure(cmd, Some(timeout)).map_err(|e| format!("{}: {e:#}", python.display()))?;
-    if !m.status.success() {
-        let why = m.stderr.last().map_or(String::new(), |l| format!(": {l}"));
-        return Err(format!(
-            "{} exited with {}{why}",
-            python.display(),
-            m.status
-        ));
-    }
-    let last = m.stdout.last().ok_or("it printed nothing")?;
-    let v = serde_json::from_str(last).map_err(|e| format!("bad output '{last}': {e}"))?;
-    Ok((v, m))
-}
-
-/// Runs `tests/py/lerobot_baseline.py` with `workers` DataLoader workers.
-pub(crate) fn run_lerobot(
-    exe: &Path,
-    dataset: &Path,
-    cache: &Path,
-    args: &BenchLoadArgs,
-    workers: usize,
-) -> Result<LeRobotRun, String> {
-    let (workspace, python) = python(exe, LEROBOT_SCRIPT, &BENCH_PYTHON)?;
-    let mut cmd = Process::new(&python);
-    cmd.arg(workspace.join(LEROBOT_SCRIPT))
-        .arg(dataset)
-        .args(["--batches", &args.lerobot_batches.to_string()])
-        .args(["--batch-size", &args.batch_size.to_string()])
-        .args(["--workers", &workers.to_string()])
-        .env("HF_HOME", cache.join("hf-home"))
+/// LeRobot's `LeRobotDataset` + torch `DataLoader` with `threads` workers.
+pub fn run_lerobot(py: &Python, r: &LoadRoute) -> Result<LeRobotRun, NotRun> {
+    let mut cmd = py.command(&LEROBOT_BASELINE)?;
+    cmd.arg(r.dataset)
+        .args(["--batches", &r.lerobot_batches.to_string()])
+        .args(["--batch-size", &r.batch_size.to_string()])
+        .args(["--workers", &r.threads.to_string()])
+        .env("HF_HOME", r.cache.join("hf-home"))
         .env("HF_HUB_OFFLINE", "1");
-    let (v, m) = run_json(&python, cmd, TIMEOUT)?;
+    let (v, m) = py.run_json(cmd, LOAD_TIMEOUT)?;
     match (v["samples"].as_u64(), v["seconds"].as_f64()) {
         (Some(samples), Some(seconds)) if samples > 0 && seconds > 0.0 => Ok(LeRobotRun {
             version: v["lerobot"].as_str().unwrap_or("?").to_string(),
@@ -129,48 +216,20 @@ pub(crate) fn run_lerobot(
             warmup_s: v["warmup_seconds"].as_f64().unwrap_or(f64::NAN),
             m,
         }),
-        _ => Err(format!("bad baseline output {v}")),
+        _ => Err(NotRun::Failed(format!("bad baseline output {v}"))),
     }
 }
 
-/// Runs one epoch of `scaledp_data.Loader` from the newest wheel in `target/wheels`.
-pub(crate) fn run_module(
-    exe: &Path,
-    dataset: &Path,
-    cache: &Path,
-    args: &BenchLoadArgs,
-    threads: usize,
-) -> Result<ModuleRun, String> {
-    let (workspace, python) = python(exe, MODULE_SCRIPT, &BENCH_PYTHON)?;
-    let wheel = newest_wheel(&workspace.join("target/wheels")).ok_or_else(|| {
-        format!(
-            "no scaledp_data wheel in {} (run scripts/build-python.sh)",
-            workspace.join("target/wheels").display()
-        )
-    })?;
-    // A wheel is a zip of the package: unpacked, it imports from PYTHONPATH.
-    let site = cache.join("py-site");
-    let _ = std::fs::remove_dir_all(&site);
-    let unpack = Process::new(&python)
-        .args(["-m", "zipfile", "-e"])
-        .arg(&wheel)
-        .arg(&site)
-        .output()
-        .map_err(|e| format!("{}: {e}", python.display()))?;
-    if !unpack.status.success() {
-        return Err(format!(
-            "unpacking {}: {}",
-            wheel.display(),
-            String::from_utf8_lossy(&unpack.stderr).trim()
-        ));
-    }
-    let mut cmd = Process::new(&python);
-    cmd.arg(workspace.join(MODULE_SCRIPT))
-        .arg(dataset)
-        .args(["--batch-size", &args.batch_size.to_string()])
-        .args(["--threads", &threads.to_string()])
+/// One epoch of `scaledp_data.Loader` from the newest wheel.
+pub fn run_module(py: &Python, r: &LoadRoute) -> Result<ModuleRun, NotRun> {
+    let site = r.cache.join("py-site");
+    py.unpack_wheel(&site)?;
+    let mut cmd = py.command(&MODULE_EPOCH)?;
+    cmd.arg(r.dataset)
+        .args(["--batch-size", &r.batch_size.to_string()])
+        .args(["--threads", &r.threads.to_string()])
         .env("PYTHONPATH", &site);
-    let (v, m) = run_json(&python, cmd, TIMEOUT)?;
+    let (v, m) = py.run_json(cmd, LOAD_TIMEOUT)?;
     match (
         v["samples"].as_u64(),
         v["images"].as_u64(),
@@ -184,20 +243,6 @@ pub(crate) fn run_module(
                 m,
             })
         }
-        _ => Err(format!("bad output {v}")),
+        _ => Err(NotRun::Failed(format!("bad output {v}"))),
     }
-}
-
-/// The most recently written `scaledp_data-*.whl` in `dir`.
-fn newest_wheel(dir: &Path) -> Option<PathBuf> {
-    std::fs::read_dir(dir)
-        .ok()?
-        .filter_map(|e| e.ok())
-        .filter(|e| {
-            let n = e.file_name();
-            let n = n.to_string_lossy();
-            n.starts_with("scaledp_data-") && n.ends_with(".whl")
-        })
-        .max_by_key(|e| e.metadata().and_then(|m| m.modified()).ok())
-        .map(|e| e.path())
 }
