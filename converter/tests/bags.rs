@@ -6,9 +6,6 @@
 // Helpers outside #[test] functions unwrap too (allowed in tests).
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
 use scaledp_converter::{read_ros1_bag, read_rosbag2, ros1, Recording, Serialization, TopicInfo};
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::RosMessage;
@@ -20,38 +17,10 @@ struct Fixtures {
     expected: Value,
 }
 
-fn python() -> PathBuf {
-    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let py = std::env::var_os("SCALEDP_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| manifest.join("../.venv/bin/python"));
-    assert!(
-        py.exists(),
-        "no Python with `rosbags` at {} (set SCALEDP_PYTHON, or run scripts/setup-python.sh)",
-        py.display()
-    );
-    py
-}
-
-fn fixtures(seconds: &str) -> Fixtures {
+fn fixtures(seconds: f64) -> Fixtures {
     let dir = tempfile::tempdir().unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/py/make_bags.py");
-    let out = Command::new(python())
-        .arg(&script)
-        .arg(dir.path())
-        .args(["--seconds", seconds])
-        .output()
-        .expect("running make_bags.py");
-    assert!(
-        out.status.success(),
-        "make_bags.py failed (run scripts/setup-python.sh?):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = std::fs::read_to_string(dir.path().join("expected.json")).unwrap();
-    Fixtures {
-        dir,
-        expected: serde_json::from_str(&text).unwrap(),
-    }
+    let expected = scaledp_testkit::make_bags_lasting(dir.path(), seconds);
+    Fixtures { dir, expected }
 }
 
 fn all(_: &TopicInfo) -> bool {
@@ -188,7 +157,7 @@ fn check(fx: &Fixtures, name: &str, rec: &Recording) {
 
 #[test]
 fn rosbags_fixtures_read_back() {
-    let fx = fixtures("3");
+    let fx = fixtures(3.0);
     let names: Vec<String> = fx.expected["files"]
         .as_object()
         .unwrap()
@@ -232,7 +201,7 @@ fn rosbags_fixtures_read_back() {
 
 #[test]
 fn damaged_inputs_are_errors() {
-    let fx = fixtures("0.2");
+    let fx = fixtures(0.2);
     let work = tempfile::tempdir().unwrap();
     let cut_path = work.path().join("cut.bag");
     for name in [

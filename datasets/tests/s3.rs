@@ -6,7 +6,7 @@
 
 mod common;
 
-use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::net::{SocketAddr, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -14,17 +14,9 @@ use std::time::{Duration, Instant};
 use common::Fixture;
 use scaledp_datasets::{Batch, LoaderOptions};
 
-/// The venv's bin directory (`SCALEDP_PYTHON` overrides the interpreter, as in tests/src/lib.rs).
+/// The venv's bin directory (the tests' Python, `SCALEDP_PYTHON` overriding it).
 fn venv_bin() -> PathBuf {
-    let python = std::env::var("SCALEDP_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("../.venv/bin/python"));
-    assert!(
-        python.exists(),
-        "{} is missing: run scripts/setup-python.sh (scripts/test.sh does)",
-        python.display()
-    );
-    python.parent().unwrap().to_path_buf()
+    scaledp_testkit::python().parent().unwrap().to_path_buf()
 }
 
 /// A moto S3 server on 127.0.0.1, killed when dropped.
@@ -35,11 +27,7 @@ struct Moto {
 
 impl Moto {
     fn start(log: &Path) -> Moto {
-        let port = TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
+        let port = scaledp_testkit::free_port().unwrap();
         let server = venv_bin().join("moto_server");
         assert!(
             server.exists(),

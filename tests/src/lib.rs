@@ -1,43 +1,15 @@
-//! Helpers for scaledp's end-to-end and interop tests: the Python peers in `.venv`, the built
-//! `scaledp` binary, loopback ports, and small rigs that keep recordings tiny.
+//! Helpers for scaledp's end-to-end and interop tests: the built `scaledp` binary, small rigs
+//! that keep recordings tiny, synthetic episodes and messages, and checks of converted datasets.
+//! The helpers the crates' own tests and the benchmarks share (the workspace root, the venv
+//! Python and its scripts, free loopback endpoints, the bag fixtures) live in
+//! `scaledp-testkit` and are re-exported here.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The workspace root.
-pub fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// The venv Python with rosbags, mcap and mcap_ros2 (`scripts/setup-python.sh` makes it);
-/// `SCALEDP_PYTHON` overrides.
-pub fn python() -> PathBuf {
-    if let Ok(p) = std::env::var("SCALEDP_PYTHON") {
-        return p.into();
-    }
-    let p = workspace().join(".venv/bin/python");
-    assert!(
-        p.exists(),
-        "{} is missing: run scripts/setup-python.sh (scripts/test.sh does)",
-        p.display()
-    );
-    p
-}
-
-/// Runs `tests/py/<script>` with `args`, returns its stdout parsed as JSON.
-pub fn run_python(script: &str, args: &[&Path]) -> serde_json::Value {
-    let out = Command::new(python())
-        .arg(workspace().join("tests/py").join(script))
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| panic!("running {script}: {e}"));
-    assert!(
-        out.status.success(),
-        "{script} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{script} printed no JSON: {e}"))
-}
+pub use scaledp_testkit::{
+    free_endpoint, make_bags, python, run_python, workspace_root as workspace,
+};
 
 /// The `scaledp` binary of the profile these tests were built in (`cargo build --bins` first).
 pub fn scaledp_bin() -> PathBuf {
@@ -53,15 +25,6 @@ pub fn scaledp_bin() -> PathBuf {
         bin.display()
     );
     bin
-}
-
-/// A loopback TCP endpoint nothing listens on right now.
-pub fn free_endpoint() -> String {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port();
-    format!("tcp/127.0.0.1:{port}")
 }
 
 /// Start of the first synthetic episode (ns); episode `seed` starts `seed` × 100 s later.
@@ -202,20 +165,6 @@ pub fn numbered_message(topic: &scaledp_schema::rig::TopicSpec, k: u64) -> Vec<u
         }
         .to_cdr()
     }
-}
-
-/// Runs `tests/py/make_bags.py DIR` (ROS 1 and rosbag2 fixtures written by `rosbags`).
-pub fn make_bags(dir: &Path) {
-    let out = Command::new(python())
-        .arg(workspace().join("tests/py/make_bags.py"))
-        .arg(dir)
-        .output()
-        .unwrap_or_else(|e| panic!("running make_bags.py: {e}"));
-    assert!(
-        out.status.success(),
-        "make_bags.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 /// Runs `scaledp convert ARGS -q`, asserts it succeeded with `converted` ("1 converted", ...) in

@@ -163,22 +163,9 @@ fn rust_side(ds: &Path, out: &Path, name: &str, kwargs: Value, resume_after: usi
 
 /// The wheel directory and the scaledp_data wheel in it (`SCALEDP_WHEEL_DIR`, else target/wheels).
 fn wheel() -> (PathBuf, PathBuf) {
-    let wheels = std::env::var_os("SCALEDP_WHEEL_DIR")
-        .map_or_else(|| workspace().join("target/wheels"), PathBuf::from);
-    let wheel = std::fs::read_dir(&wheels)
-        .into_iter()
-        .flatten()
-        .map(|e| e.unwrap().path())
-        .find(|p| {
-            let n = p.file_name().unwrap().to_string_lossy();
-            n.starts_with("scaledp_data-") && n.ends_with(".whl")
-        })
-        .unwrap_or_else(|| {
-            panic!(
-                "no scaledp_data wheel in {}: run scripts/build-python.sh (scripts/test.sh does)",
-                wheels.display()
-            )
-        });
+    let wheel = scaledp_testkit::scaledp_data_wheel(None, Some(&workspace()))
+        .unwrap_or_else(|e| panic!("{e} (scripts/test.sh does)"));
+    let wheels = wheel.parent().unwrap().to_path_buf();
     (wheels, wheel)
 }
 
