@@ -174,7 +174,8 @@ impl CheckpointConfig {
     /// Writes `dir/config.json`.
     pub(crate) fn write(&self, dir: &Path) -> Result<()> {
         let path = dir.join(CONFIG_FILE);
-        let bytes = serde_json::to_vec_pretty(self).map_err(|e| Error::checkpoint(path.display(), e))?;
+        let bytes =
+            serde_json::to_vec_pretty(self).map_err(|e| Error::checkpoint(path.display(), e))?;
         std::fs::write(&path, bytes).map_err(|e| Error::io(&path, e))
     }
 }
@@ -208,7 +209,10 @@ pub fn list(run: &Path) -> Result<Vec<(u64, PathBuf)>> {
     for e in entries {
         let e = e.map_err(|err| Error::io(&dir, err))?;
         let name = e.file_name().to_string_lossy().to_string();
-        if let Some(step) = name.strip_prefix("step_").and_then(|s| s.parse::<u64>().ok()) {
+        if let Some(step) = name
+            .strip_prefix("step_")
+            .and_then(|s| s.parse::<u64>().ok())
+        {
             if e.path().join(CONFIG_FILE).exists() {
                 out.push((step, e.path()));
             }
@@ -227,7 +231,10 @@ pub fn resolve(path: &Path) -> Result<PathBuf> {
     if !path.exists() {
         return Err(Error::io(
             path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such checkpoint or run directory"),
+            std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                "no such checkpoint or run directory",
+            ),
         ));
     }
     list(path)?.pop().map(|(_, p)| p).ok_or_else(|| {

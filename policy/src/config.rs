@@ -180,8 +180,7 @@ impl ModelConfig {
     /// Checks the numbers fit together.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Config(m));
-        if self.depth == 0 || self.hidden == 0 || self.heads == 0 || self.hidden % self.heads != 0
-        {
+        if self.depth == 0 || self.hidden == 0 || self.heads == 0 || self.hidden % self.heads != 0 {
             return bad(format!(
                 "hidden width {} must be a positive multiple of the {} heads (depth {})",
                 self.hidden, self.heads, self.depth
@@ -205,8 +204,9 @@ impl ModelConfig {
                 return bad("resnet_width, keypoints and feature_dim must be at least 1".into());
             }
         }
-        let mut prefixes: Vec<String> =
-            (0..self.cameras.len()).map(|i| self.camera_prefix(i)).collect();
+        let mut prefixes: Vec<String> = (0..self.cameras.len())
+            .map(|i| self.camera_prefix(i))
+            .collect();
         prefixes.sort();
         prefixes.dedup();
         if prefixes.len() != self.cameras.len() {

@@ -31,7 +31,9 @@ pub enum Error {
     #[error("{0}")]
     Config(String),
     /// A checkpoint does not fit the dataset or observation it is used with.
-    #[error("{what} mismatch: the checkpoint {checkpoint} has {expected}, the {other} has {found}")]
+    #[error(
+        "{what} mismatch: the checkpoint {checkpoint} has {expected}, the {other} has {found}"
+    )]
     Mismatch {
         /// What differs (`cameras`, `state dimension`, ...).
         what: String,

@@ -77,19 +77,35 @@ pub fn predict_episode(
     };
     let info = loader.info().clone();
     if info.state_names.len() != m.state_dim {
-        return Err(mismatch("state dimension", &ckpt, &cfg.state_names, dataset, &info.state_names));
+        return Err(mismatch(
+            "state dimension",
+            &ckpt,
+            &cfg.state_names,
+            dataset,
+            &info.state_names,
+        ));
     }
     if info.action_names.len() != m.action_dim {
-        return Err(mismatch("action dimension", &ckpt, &cfg.action_names, dataset, &info.action_names));
+        return Err(mismatch(
+            "action dimension",
+            &ckpt,
+            &cfg.action_names,
+            dataset,
+            &info.action_names,
+        ));
     }
-    let pos = info.episodes.iter().position(|&e| e == episode).ok_or_else(|| {
-        Error::Config(format!(
-            "{dataset}: no episode {episode} (it has {} episodes: {}..={})",
-            info.episodes.len(),
-            info.episodes.first().copied().unwrap_or(0),
-            info.episodes.last().copied().unwrap_or(-1)
-        ))
-    })?;
+    let pos = info
+        .episodes
+        .iter()
+        .position(|&e| e == episode)
+        .ok_or_else(|| {
+            Error::Config(format!(
+                "{dataset}: no episode {episode} (it has {} episodes: {}..={})",
+                info.episodes.len(),
+                info.episodes.first().copied().unwrap_or(0),
+                info.episodes.last().copied().unwrap_or(-1)
+            ))
+        })?;
     let start: usize = info.episode_lengths[..pos].iter().sum();
     let len = info.episode_lengths[pos];
     loader.resume(LoaderState {
@@ -130,8 +146,10 @@ pub fn predict_episode(
         cfg.normalizer.action.invert(&mut pred);
         out.frames.extend_from_slice(&batch.frame_index[..keep]);
         out.predicted.extend_from_slice(&pred[..keep * ch * a]);
-        out.recorded.extend_from_slice(&batch.action[..keep * ch * a]);
-        out.is_pad.extend_from_slice(&batch.action_is_pad[..keep * ch]);
+        out.recorded
+            .extend_from_slice(&batch.action[..keep * ch * a]);
+        out.is_pad
+            .extend_from_slice(&batch.action_is_pad[..keep * ch]);
         let _ = per_img;
         batch.len = keep;
         loader.recycle(batch);
@@ -161,13 +179,7 @@ pub fn predict_episode(
     Ok(out)
 }
 
-fn mismatch(
-    what: &str,
-    ckpt: &str,
-    expected: &[String],
-    dataset: &str,
-    found: &[String],
-) -> Error {
+fn mismatch(what: &str, ckpt: &str, expected: &[String], dataset: &str, found: &[String]) -> Error {
     Error::Mismatch {
         what: what.into(),
         checkpoint: ckpt.into(),

@@ -14,7 +14,9 @@ use crate::error::{Error, Result};
 
 /// ᾱ(t) of the cosine schedule (Nichol & Dhariwal), s = 0.008.
 fn alpha_bar(t: f64) -> f64 {
-    ((t + 0.008) / 1.008 * std::f64::consts::FRAC_PI_2).cos().powi(2)
+    ((t + 0.008) / 1.008 * std::f64::consts::FRAC_PI_2)
+        .cos()
+        .powi(2)
 }
 
 /// Largest beta (`max_beta` of diffusers' `betas_for_alpha_bar`).
@@ -33,7 +35,9 @@ impl NoiseScheduler {
     /// of them, descending, until [`NoiseScheduler::set_timesteps`].
     pub fn new(train_steps: usize) -> Result<Self> {
         if train_steps == 0 {
-            return Err(Error::Config("the diffusion needs at least 1 training step".into()));
+            return Err(Error::Config(
+                "the diffusion needs at least 1 training step".into(),
+            ));
         }
         let n = train_steps as f64;
         let betas: Vec<f32> = (0..train_steps)
@@ -95,7 +99,10 @@ impl NoiseScheduler {
     pub fn add_noise(&self, x0: &Tensor, noise: &Tensor, t: &[usize]) -> Result<Tensor> {
         let b = x0.dim(0)?;
         if t.len() != b {
-            return Err(Error::Config(format!("{} timesteps for {b} samples", t.len())));
+            return Err(Error::Config(format!(
+                "{} timesteps for {b} samples",
+                t.len()
+            )));
         }
         let mut shape = vec![1usize; x0.rank()];
         shape[0] = b;

@@ -22,7 +22,10 @@ fn encoders_and_denoiser_match_the_numpy_reference() {
         "{} is missing: run `bash scripts/setup-python.sh` (the numpy reference needs it)",
         python.display()
     );
-    let cams = vec!["observation.images.front".to_string(), "observation.images.wrist.left".to_string()];
+    let cams = vec![
+        "observation.images.front".to_string(),
+        "observation.images.wrist.left".to_string(),
+    ];
     // 41×35: odd margins, so the centre crop's rounding is exercised.
     let mut cfg = ModelConfig::new(ModelSize::Ti, cams, (41, 35), 3, 2);
     (cfg.size, cfg.depth, cfg.hidden, cfg.heads) = (None, 2, 32, 4);
@@ -37,11 +40,15 @@ fn encoders_and_denoiser_match_the_numpy_reference() {
     let b = 2;
     let n_img = b * cfg.obs_horizon * 2 * 3 * 41 * 35;
     let images: Vec<u8> = (0..n_img).map(|i| ((i * 7919) % 251) as u8).collect();
-    let state: Vec<f32> = (0..b * cfg.obs_horizon * 3).map(|i| (i as f32 * 0.37).sin()).collect();
+    let state: Vec<f32> = (0..b * cfg.obs_horizon * 3)
+        .map(|i| (i as f32 * 0.37).sin())
+        .collect();
     let x: Vec<f32> = (0..b * 5 * 2).map(|i| (i as f32 * 0.61).cos()).collect();
     let t = [7.0f32, 93.0];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-    let cond = model.encode(&images, &state, b, Crop::Center, &mut rng).unwrap();
+    let cond = model
+        .encode(&images, &state, b, Crop::Center, &mut rng)
+        .unwrap();
     let xt = Tensor::from_slice(&x, (b, 5, 2), &dev).unwrap();
     let eps = model.predict_noise(&xt, &t, &cond).unwrap();
     let case = serde_json::json!({
@@ -55,7 +62,11 @@ fn encoders_and_denoiser_match_the_numpy_reference() {
         .arg(&case_path)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let reference: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for (name, ours) in [("cond", cond), ("eps", eps)] {
         let ours = ours.flatten_all().unwrap().to_vec1::<f32>().unwrap();

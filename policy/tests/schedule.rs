@@ -6,7 +6,9 @@ use scaledp_policy::{cosine_lr, EmaConfig, NoiseScheduler};
 
 /// ᾱ(t) = cos²((t + 0.008) / 1.008 · π/2).
 fn alpha_bar(t: f64) -> f64 {
-    ((t + 0.008) / 1.008 * std::f64::consts::PI / 2.0).cos().powi(2)
+    ((t + 0.008) / 1.008 * std::f64::consts::PI / 2.0)
+        .cos()
+        .powi(2)
 }
 
 #[test]
@@ -14,10 +16,14 @@ fn alphas_cumprod_follow_the_capped_cosine_schedule() -> scaledp_policy::Result<
     let s = NoiseScheduler::new(100)?;
     let mut prod = 1.0f64;
     for i in 0..100 {
-        let beta = (1.0 - alpha_bar((i + 1) as f64 / 100.0) / alpha_bar(i as f64 / 100.0)).min(0.999);
+        let beta =
+            (1.0 - alpha_bar((i + 1) as f64 / 100.0) / alpha_bar(i as f64 / 100.0)).min(0.999);
         prod *= 1.0 - beta;
         let got = f64::from(s.alphas_cumprod()[i]);
-        assert!((got - prod).abs() <= 1e-6 * prod.max(1e-3), "ᾱ[{i}] = {got}, formula {prod}");
+        assert!(
+            (got - prod).abs() <= 1e-6 * prod.max(1e-3),
+            "ᾱ[{i}] = {got}, formula {prod}"
+        );
         assert!((f64::from(s.betas()[i]) - beta).abs() < 1e-7);
     }
     // Only the last beta reaches the cap, as in diffusers.
@@ -37,7 +43,9 @@ fn ddim_uses_leading_timesteps_and_the_eta_zero_update() -> scaledp_policy::Resu
     let ab = |t: usize| {
         let mut p = 1.0;
         for i in 0..=t {
-            p *= 1.0 - (1.0 - alpha_bar((i + 1) as f64 / 100.0) / alpha_bar(i as f64 / 100.0)).min(0.999);
+            p *= 1.0
+                - (1.0 - alpha_bar((i + 1) as f64 / 100.0) / alpha_bar(i as f64 / 100.0))
+                    .min(0.999);
         }
         p
     };
@@ -45,13 +53,23 @@ fn ddim_uses_leading_timesteps_and_the_eta_zero_update() -> scaledp_policy::Resu
         let got = s.step(&eps, t, &x)?.flatten_all()?.to_vec1::<f32>()?;
         let (a, ap) = (ab(t), prev.map_or(1.0, ab));
         for k in 0..3 {
-            let (xv, e) = (f64::from([0.3f32, -0.7, 2.5][k]), f64::from([0.1f32, 0.4, -1.2][k]));
+            let (xv, e) = (
+                f64::from([0.3f32, -0.7, 2.5][k]),
+                f64::from([0.1f32, 0.4, -1.2][k]),
+            );
             let x0 = ((xv - (1.0 - a).sqrt() * e) / a.sqrt()).clamp(-1.0, 1.0);
             let want = ap.sqrt() * x0 + (1.0 - ap).sqrt() * e;
-            assert!((f64::from(got[k]) - want).abs() < 1e-5, "t {t}: {} vs {want}", got[k]);
+            assert!(
+                (f64::from(got[k]) - want).abs() < 1e-5,
+                "t {t}: {} vs {want}",
+                got[k]
+            );
         }
     }
-    let noisy = s.add_noise(&x, &eps, &[30])?.flatten_all()?.to_vec1::<f32>()?;
+    let noisy = s
+        .add_noise(&x, &eps, &[30])?
+        .flatten_all()?
+        .to_vec1::<f32>()?;
     let a = ab(30);
     let want = a.sqrt() * 0.3 + (1.0 - a).sqrt() * 0.1;
     assert!((f64::from(noisy[0]) - want).abs() < 1e-6);

@@ -47,7 +47,11 @@ fn a_checkpoint_loads_back_to_bit_identical_outputs() {
     assert_eq!(summary.steps, 3);
     assert!(matches!(events.last(), Some(Event::Checkpoint(_))));
     let dir = summary.checkpoint.unwrap();
-    for f in ["model.safetensors", "train_state.safetensors", "config.json"] {
+    for f in [
+        "model.safetensors",
+        "train_state.safetensors",
+        "config.json",
+    ] {
         assert!(dir.join(f).exists(), "{f}");
     }
     let policy = Policy::load(out.path(), &dev).unwrap();
@@ -55,7 +59,10 @@ fn a_checkpoint_loads_back_to_bit_identical_outputs() {
     let cfg = policy.config();
     assert_eq!(cfg.robot_type.as_deref(), Some("test_arm"));
     assert_eq!(cfg.rig.as_deref(), Some("test_rig"));
-    assert_eq!(cfg.model.cameras, vec!["observation.images.front", "observation.images.wrist"]);
+    assert_eq!(
+        cfg.model.cameras,
+        vec!["observation.images.front", "observation.images.wrist"]
+    );
     // Same inputs through the in-memory EMA model and the loaded one.
     let m = &cfg.model;
     let n_img = 2 * m.obs_horizon * 2 * 3 * 20 * 16;
@@ -63,22 +70,33 @@ fn a_checkpoint_loads_back_to_bit_identical_outputs() {
     let state = vec![0.2f32; 2 * m.obs_horizon * 3];
     let run = |model: &scaledp_policy::model::ScaleDp| {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-        let cond = model.encode(&images, &state, 2, Crop::Random, &mut rng).unwrap();
+        let cond = model
+            .encode(&images, &state, 2, Crop::Random, &mut rng)
+            .unwrap();
         let x = Tensor::ones((2, m.action_chunk, 2), candle_core::DType::F32, &dev).unwrap();
         let eps = model.predict_noise(&x, &[3.0, 50.0], &cond).unwrap();
         eps.flatten_all().unwrap().to_vec1::<f32>().unwrap()
     };
     let (mem, loaded) = (run(t.ema_model()), run(policy.model()));
-    assert!(mem.iter().any(|v| *v != 0.0), "the trained model outputs something");
+    assert!(
+        mem.iter().any(|v| *v != 0.0),
+        "the trained model outputs something"
+    );
     assert_eq!(mem, loaded);
     // predict is deterministic for a seed, and gives raw-unit chunks of [C, A].
     let obs = Observation {
         images: images[..n_img / 2].to_vec(),
         state: vec![0.1; m.obs_horizon * 3],
     };
-    let (p1, p2) = (policy.predict(&obs, 4).unwrap(), policy.predict(&obs, 4).unwrap());
+    let (p1, p2) = (
+        policy.predict(&obs, 4).unwrap(),
+        policy.predict(&obs, 4).unwrap(),
+    );
     assert_eq!(p1, p2);
-    assert_eq!((p1.chunk, p1.dim, p1.actions.len()), (m.action_chunk, 2, m.action_chunk * 2));
+    assert_eq!(
+        (p1.chunk, p1.dim, p1.actions.len()),
+        (m.action_chunk, 2, m.action_chunk * 2)
+    );
 }
 
 /// One short episode, learnt: the loss falls 10× and DDIM samples give back its actions.
@@ -129,7 +147,11 @@ fn overfitting_one_episode_reproduces_its_actions() {
     let mean = errs.iter().sum::<f32>() / errs.len() as f32;
     let p90 = errs[errs.len() * 9 / 10];
     // Every recorded step of every chunk: on average well within 0.1, nine in ten within 0.1.
-    assert!(mean <= 0.05 && p90 <= 0.1, "normalized error: mean {mean}, 90th percentile {p90}, max {:?} (loss {first} → {last})", errs.last());
+    assert!(
+        mean <= 0.05 && p90 <= 0.1,
+        "normalized error: mean {mean}, 90th percentile {p90}, max {:?} (loss {first} → {last})",
+        errs.last()
+    );
 }
 
 #[test]
@@ -144,7 +166,10 @@ fn a_nan_in_a_batch_refuses_the_step_naming_the_sample() {
     let opts = common::tiny().batch_size(6);
     let mut t = Trainer::new(&ds.location(), out.path(), opts, &Device::Cpu).unwrap();
     let e = t.step().unwrap_err().to_string();
-    assert!(e.contains("non-finite state") && e.contains("episode 0 frame"), "{e}");
+    assert!(
+        e.contains("non-finite state") && e.contains("episode 0 frame"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -160,21 +185,36 @@ fn mismatched_missing_and_foreign_checkpoints_are_named() {
         cameras: vec!["left".into()],
         ..Default::default()
     });
-    let e = predict_episode(&policy, &other.location(), 0, 4, 0).unwrap_err().to_string();
-    assert!(e.contains("cameras mismatch") && e.contains("observation.images.front"), "{e}");
+    let e = predict_episode(&policy, &other.location(), 0, 4, 0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cameras mismatch") && e.contains("observation.images.front"),
+        "{e}"
+    );
     // A dataset with another state width.
     let other = common::write(&common::Fixture {
         state_dim: 5,
         ..Default::default()
     });
-    let e = predict_episode(&policy, &other.location(), 0, 4, 0).unwrap_err().to_string();
+    let e = predict_episode(&policy, &other.location(), 0, 4, 0)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("state dimension mismatch"), "{e}");
     // An episode the dataset does not have.
-    let e = predict_episode(&policy, &ds.location(), 42, 4, 0).unwrap_err().to_string();
+    let e = predict_episode(&policy, &ds.location(), 42, 4, 0)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("no episode 42"), "{e}");
     // An observation of the wrong size.
-    let e = policy.predict(&Observation::default(), 0).unwrap_err().to_string();
-    assert!(e.contains("image bytes") && e.contains("observation.images.front"), "{e}");
+    let e = policy
+        .predict(&Observation::default(), 0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("image bytes") && e.contains("observation.images.front"),
+        "{e}"
+    );
     // A missing weights file.
     let broken = out.path().join("broken");
     std::fs::create_dir_all(&broken).unwrap();
@@ -183,13 +223,24 @@ fn mismatched_missing_and_foreign_checkpoints_are_named() {
     assert!(e.contains("model.safetensors"), "{e}");
     // A config.json of another version.
     let text = std::fs::read_to_string(dir.join("config.json")).unwrap();
-    std::fs::write(broken.join("config.json"), text.replace("\"version\": 1", "\"version\": 7")).unwrap();
+    std::fs::write(
+        broken.join("config.json"),
+        text.replace("\"version\": 1", "\"version\": 7"),
+    )
+    .unwrap();
     let e = Policy::load(&broken, &dev).unwrap_err().to_string();
-    assert!(e.contains("config.json") && e.contains("version Some(7)"), "{e}");
+    assert!(
+        e.contains("config.json") && e.contains("version Some(7)"),
+        "{e}"
+    );
     // Nothing there at all.
-    let e = Policy::load(&out.path().join("nope"), &dev).unwrap_err().to_string();
+    let e = Policy::load(&out.path().join("nope"), &dev)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("nope"), "{e}");
     // A new run where checkpoints already are.
-    let e = Trainer::new(&ds.location(), out.path(), common::tiny(), &dev).unwrap_err().to_string();
+    let e = Trainer::new(&ds.location(), out.path(), common::tiny(), &dev)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("already holds checkpoints"), "{e}");
 }

@@ -66,6 +66,10 @@ pub enum Command {
     /// Measure throughput and cost.
     #[command(subcommand)]
     Bench(scaledp_bench::BenchCommand),
+    /// Train a ScaleDP policy on a LeRobot dataset (checkpoints, metrics.jsonl, --resume).
+    Train(crate::commands::train::TrainArgs),
+    /// Run a checkpoint over a recorded episode: predicted vs recorded actions and their error.
+    Predict(crate::commands::predict::PredictArgs),
     /// The whole path on a simulated rig: records a few short episodes over loopback, converts
     /// them into a LeRobot dataset and runs one epoch of the training-data loader.
     Demo(DemoArgs),

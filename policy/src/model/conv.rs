@@ -23,8 +23,16 @@ const MAX_PATCH_VALUES: usize = 32 << 20;
 
 /// A convolution without bias, PyTorch's `Conv2d(..., bias=False)` with equal stride and
 /// padding on both axes; `x` is `[B, C_in, H, W]`, `w` `[C_out, C_in, kh, kw]`.
-pub fn conv2d(x: &Tensor, w: &Tensor, stride: usize, padding: usize) -> candle_core::Result<Tensor> {
-    if x.device().is_cpu() && x.dtype() == DType::F32 && std::env::var_os("SCALEDP_NATIVE_CONV").is_none() {
+pub fn conv2d(
+    x: &Tensor,
+    w: &Tensor,
+    stride: usize,
+    padding: usize,
+) -> candle_core::Result<Tensor> {
+    if x.device().is_cpu()
+        && x.dtype() == DType::F32
+        && std::env::var_os("SCALEDP_NATIVE_CONV").is_none()
+    {
         let x = x.contiguous()?;
         let w = w.contiguous()?;
         x.apply_op2(&w, Conv { stride, padding })
@@ -58,7 +66,17 @@ impl Geom {
         if h + 2 * padding < kh || w + 2 * padding < kw || stride == 0 {
             candle_core::bail!("conv2d: kernel {kh}×{kw} larger than the padded input {h}×{w}");
         }
-        Ok(Geom { b, c_in, h, w, c_out, kh, kw, stride, padding })
+        Ok(Geom {
+            b,
+            c_in,
+            h,
+            w,
+            c_out,
+            kh,
+            kw,
+            stride,
+            padding,
+        })
     }
     fn out_h(&self) -> usize {
         (self.h + 2 * self.padding - self.kh) / self.stride + 1
@@ -96,32 +114,34 @@ fn im2col(g: &Geom, x: &[f32], n: usize) -> Vec<f32> {
     let (oh, ow, k) = (g.out_h(), g.out_w(), g.k());
     let mut out = vec![0f32; n * oh * ow * k];
     let plane = g.h * g.w;
-    out.par_chunks_mut(ow * k).enumerate().for_each(|(row, dst)| {
-        let (s, oy) = (row / oh, row % oh);
-        let xs = &x[s * g.c_in * plane..(s + 1) * g.c_in * plane];
-        for ox in 0..ow {
-            let d = &mut dst[ox * k..(ox + 1) * k];
-            let mut idx = 0;
-            for c in 0..g.c_in {
-                let xc = &xs[c * plane..(c + 1) * plane];
-                for i in 0..g.kh {
-                    let y = (oy * g.stride + i) as isize - g.padding as isize;
-                    if y < 0 || y >= g.h as isize {
-                        idx += g.kw;
-                        continue;
-                    }
-                    let xr = &xc[y as usize * g.w..(y as usize + 1) * g.w];
-                    for j in 0..g.kw {
-                        let xx = (ox * g.stride + j) as isize - g.padding as isize;
-                        if xx >= 0 && xx < g.w as isize {
-                            d[idx] = xr[xx as usize];
+    out.par_chunks_mut(ow * k)
+        .enumerate()
+        .for_each(|(row, dst)| {
+            let (s, oy) = (row / oh, row % oh);
+            let xs = &x[s * g.c_in * plane..(s + 1) * g.c_in * plane];
+            for ox in 0..ow {
+                let d = &mut dst[ox * k..(ox + 1) * k];
+                let mut idx = 0;
+                for c in 0..g.c_in {
+                    let xc = &xs[c * plane..(c + 1) * plane];
+                    for i in 0..g.kh {
+                        let y = (oy * g.stride + i) as isize - g.padding as isize;
+                        if y < 0 || y >= g.h as isize {
+                            idx += g.kw;
+                            continue;
                         }
-                        idx += 1;
+                        let xr = &xc[y as usize * g.w..(y as usize + 1) * g.w];
+                        for j in 0..g.kw {
+                            let xx = (ox * g.stride + j) as isize - g.padding as isize;
+                            if xx >= 0 && xx < g.w as isize {
+                                d[idx] = xr[xx as usize];
+                            }
+                            idx += 1;
+                        }
                     }
                 }
             }
-        }
-    });
+        });
     out
 }
 
@@ -129,33 +149,35 @@ fn im2col(g: &Geom, x: &[f32], n: usize) -> Vec<f32> {
 fn col2im(g: &Geom, cols: &[f32], dx: &mut [f32]) {
     let (oh, ow, k) = (g.out_h(), g.out_w(), g.k());
     let plane = g.h * g.w;
-    dx.par_chunks_mut(g.c_in * plane).enumerate().for_each(|(s, xs)| {
-        let cs = &cols[s * oh * ow * k..(s + 1) * oh * ow * k];
-        for oy in 0..oh {
-            for ox in 0..ow {
-                let src = &cs[(oy * ow + ox) * k..(oy * ow + ox + 1) * k];
-                let mut idx = 0;
-                for c in 0..g.c_in {
-                    let xc = &mut xs[c * plane..(c + 1) * plane];
-                    for i in 0..g.kh {
-                        let y = (oy * g.stride + i) as isize - g.padding as isize;
-                        if y < 0 || y >= g.h as isize {
-                            idx += g.kw;
-                            continue;
-                        }
-                        let xr = &mut xc[y as usize * g.w..(y as usize + 1) * g.w];
-                        for j in 0..g.kw {
-                            let xx = (ox * g.stride + j) as isize - g.padding as isize;
-                            if xx >= 0 && xx < g.w as isize {
-                                xr[xx as usize] += src[idx];
+    dx.par_chunks_mut(g.c_in * plane)
+        .enumerate()
+        .for_each(|(s, xs)| {
+            let cs = &cols[s * oh * ow * k..(s + 1) * oh * ow * k];
+            for oy in 0..oh {
+                for ox in 0..ow {
+                    let src = &cs[(oy * ow + ox) * k..(oy * ow + ox + 1) * k];
+                    let mut idx = 0;
+                    for c in 0..g.c_in {
+                        let xc = &mut xs[c * plane..(c + 1) * plane];
+                        for i in 0..g.kh {
+                            let y = (oy * g.stride + i) as isize - g.padding as isize;
+                            if y < 0 || y >= g.h as isize {
+                                idx += g.kw;
+                                continue;
                             }
-                            idx += 1;
+                            let xr = &mut xc[y as usize * g.w..(y as usize + 1) * g.w];
+                            for j in 0..g.kw {
+                                let xx = (ox * g.stride + j) as isize - g.padding as isize;
+                                if xx >= 0 && xx < g.w as isize {
+                                    xr[xx as usize] += src[idx];
+                                }
+                                idx += 1;
+                            }
                         }
                     }
                 }
             }
-        }
-    });
+        });
 }
 
 /// `[n, C, P]` (NCHW) → `[n · P, C]`.
@@ -174,14 +196,17 @@ fn to_rows(v: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
 
 /// `[n · P, C]` → `[n, C, P]` (NCHW), written into `dst`.
 fn from_rows(v: &[f32], n: usize, c: usize, p: usize, dst: &mut [f32]) {
-    dst[..n * c * p].par_chunks_mut(c * p).enumerate().for_each(|(s, d)| {
-        let src = &v[s * p * c..(s + 1) * p * c];
-        for pi in 0..p {
-            for ci in 0..c {
-                d[ci * p + pi] = src[pi * c + ci];
+    dst[..n * c * p]
+        .par_chunks_mut(c * p)
+        .enumerate()
+        .for_each(|(s, d)| {
+            let src = &v[s * p * c..(s + 1) * p * c];
+            for pi in 0..p {
+                for ci in 0..c {
+                    d[ci * p + pi] = src[pi * c + ci];
+                }
             }
-        }
-    });
+        });
 }
 
 /// The patch matrix of samples `s0 .. s0 + n` as a `[n · P, K]` tensor.
@@ -382,7 +407,10 @@ mod tests {
                 };
                 let d = (a - b)?.abs()?.max_all()?.to_scalar::<f32>()?;
                 let scale = b.abs()?.max_all()?.to_scalar::<f32>()?;
-                assert!(d <= 1e-4 * scale.max(1.0), "gradient differs by {d} (of {scale})");
+                assert!(
+                    d <= 1e-4 * scale.max(1.0),
+                    "gradient differs by {d} (of {scale})"
+                );
             }
         }
         Ok(())

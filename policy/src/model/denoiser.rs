@@ -57,8 +57,7 @@ pub(crate) fn layer_norm(x: &Tensor) -> Result<Tensor> {
 
 /// `x · (1 + scale) + shift` with `[B, d]` modulations broadcast over the tokens of `[B, T, d]`.
 fn modulate(x: &Tensor, shift: &Tensor, scale: &Tensor) -> Result<Tensor> {
-    Ok(x
-        .broadcast_mul(&(scale.unsqueeze(1)? + 1.0)?)?
+    Ok(x.broadcast_mul(&(scale.unsqueeze(1)? + 1.0)?)?
         .broadcast_add(&shift.unsqueeze(1)?)?)
 }
 

@@ -28,7 +28,12 @@ struct SpatialSoftmax {
 impl SpatialSoftmax {
     fn new(vb: &Builder, c_in: usize, keypoints: usize) -> Result<Self> {
         Ok(SpatialSoftmax {
-            weight: vb.get(&[keypoints, c_in, 1, 1], "weight", Init::FanInUniform(c_in), true)?,
+            weight: vb.get(
+                &[keypoints, c_in, 1, 1],
+                "weight",
+                Init::FanInUniform(c_in),
+                true,
+            )?,
             bias: vb.get(&[keypoints], "bias", Init::FanInUniform(c_in), false)?,
             keypoints,
         })
@@ -83,14 +88,20 @@ impl ObsEncoder {
         Ok(ObsEncoder {
             backbone,
             pool,
-            linear_w: l.get(&[feature_dim, fan_in], "weight", Init::FanInUniform(fan_in), true)?,
+            linear_w: l.get(
+                &[feature_dim, fan_in],
+                "weight",
+                Init::FanInUniform(fan_in),
+                true,
+            )?,
             linear_b: l.get(&[feature_dim], "bias", Init::FanInUniform(fan_in), false)?,
         })
     }
 
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let f = self.pool.forward(&self.backbone.forward(x)?)?;
-        Ok(f.matmul(&self.linear_w.t()?)?.broadcast_add(&self.linear_b)?)
+        Ok(f.matmul(&self.linear_w.t()?)?
+            .broadcast_add(&self.linear_b)?)
     }
 }
 

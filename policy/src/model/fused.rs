@@ -28,7 +28,9 @@ pub fn group_norm(
     let mean = xg.mean_keepdim(2)?;
     let xc = xg.broadcast_sub(&mean)?;
     let var = xc.sqr()?.mean_keepdim(2)?;
-    let xhat = xc.broadcast_div(&(var + eps)?.sqrt()?)?.reshape(dims.as_slice())?;
+    let xhat = xc
+        .broadcast_div(&(var + eps)?.sqrt()?)?
+        .reshape(dims.as_slice())?;
     let mut wdims = vec![1; dims.len()];
     wdims[1] = c;
     let y = xhat
@@ -79,7 +81,11 @@ impl Dims {
 fn stats(v: &[f32], eps: f64) -> (f32, f32) {
     let n = v.len().max(1) as f64;
     let mean = v.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
-    let var = v.iter().map(|&x| (f64::from(x) - mean).powi(2)).sum::<f64>() / n;
+    let var = v
+        .iter()
+        .map(|&x| (f64::from(x) - mean).powi(2))
+        .sum::<f64>()
+        / n;
     (mean as f32, (1.0 / (var + eps).sqrt()) as f32)
 }
 
@@ -354,7 +360,9 @@ mod tests {
                 let mean = xg.mean_keepdim(2)?;
                 let xc = xg.broadcast_sub(&mean)?;
                 let var = xc.sqr()?.mean_keepdim(2)?;
-                let xhat = xc.broadcast_div(&(var + 1e-5)?.sqrt()?)?.reshape((3, 8, 5, 4))?;
+                let xhat = xc
+                    .broadcast_div(&(var + 1e-5)?.sqrt()?)?
+                    .reshape((3, 8, 5, 4))?;
                 let y = xhat
                     .broadcast_mul(&g.as_tensor().reshape((1, 8, 1, 1))?)?
                     .broadcast_add(&b.as_tensor().reshape((1, 8, 1, 1))?)?;
@@ -379,18 +387,25 @@ mod tests {
     }
 
     #[test]
-    fn max_pool_matches_pytorchs_padding_and_routes_gradients_to_the_max() -> candle_core::Result<()> {
+    fn max_pool_matches_pytorchs_padding_and_routes_gradients_to_the_max() -> candle_core::Result<()>
+    {
         let dev = Device::Cpu;
         let x = Tensor::arange(0f32, 35., &dev)?.reshape((1, 1, 5, 7))?;
         let y = max_pool_3x3_s2(&x)?;
         assert_eq!(y.dims(), &[1, 1, 3, 4]);
         // Window of output (0, 0) covers rows 0..2, cols 0..2: max is x[1][1] = 8.
         let v = y.flatten_all()?.to_vec1::<f32>()?;
-        assert_eq!(v, vec![8., 10., 12., 13., 22., 24., 26., 27., 29., 31., 33., 34.]);
+        assert_eq!(
+            v,
+            vec![8., 10., 12., 13., 22., 24., 26., 27., 29., 31., 33., 34.]
+        );
         let xv = Var::from_tensor(&x)?;
         let g = max_pool_3x3_s2(xv.as_tensor())?.sum_all()?.backward()?;
         let dx = g.get(xv.as_tensor()).map(|t| t.flatten_all()).transpose()?;
-        let dx = dx.map(|t| t.to_vec1::<f32>()).transpose()?.unwrap_or_default();
+        let dx = dx
+            .map(|t| t.to_vec1::<f32>())
+            .transpose()?
+            .unwrap_or_default();
         assert_eq!(dx.iter().sum::<f32>(), 12.0);
         assert_eq!(dx[8], 1.0);
         Ok(())

@@ -74,7 +74,11 @@ impl ScaleDp {
 
     /// A freshly initialised model (DiT's adaLN-Zero init for the denoiser, torchvision's for
     /// the trunks), the same for the same seed, and its parameters in creation order.
-    pub(crate) fn fresh(cfg: &ModelConfig, seed: u64, device: &Device) -> Result<(Self, Vec<Param>)> {
+    pub(crate) fn fresh(
+        cfg: &ModelConfig,
+        seed: u64,
+        device: &Device,
+    ) -> Result<(Self, Vec<Param>)> {
         let vb = Builder::fresh(seed, device);
         let mut model = Self::build(&vb, cfg, device)?;
         let params = vb.finish()?.0;

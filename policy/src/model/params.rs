@@ -123,7 +123,9 @@ impl Builder {
         inner.count += n;
         let device = inner.device.clone();
         let tensor = match &mut inner.source {
-            Source::Shapes => return Ok(Tensor::zeros((), DType::F32, &device)?.broadcast_as(shape)?),
+            Source::Shapes => {
+                return Ok(Tensor::zeros((), DType::F32, &device)?.broadcast_as(shape)?)
+            }
             Source::Fresh(rng) => {
                 let values = init_values(rng, shape, init);
                 Tensor::from_vec(values, shape, &device)?
@@ -136,7 +138,10 @@ impl Builder {
                 if t.dims() != shape {
                     return Err(Error::Checkpoint {
                         path: file.clone(),
-                        reason: format!("{full} has shape {:?}, the model needs {shape:?}", t.dims()),
+                        reason: format!(
+                            "{full} has shape {:?}, the model needs {shape:?}",
+                            t.dims()
+                        ),
                     });
                 }
                 t.to_dtype(DType::F32)?.to_device(&device)?

@@ -122,8 +122,7 @@ pub(super) fn save(t: &mut Trainer) -> Result<PathBuf> {
     checkpoint::write_tensors(&tmp.join(checkpoint::TRAIN_STATE_FILE), state)?;
     t.cfg.step = t.step;
     t.cfg.loader = Some(t.loader.state());
-    t.cfg.train =
-        serde_json::to_value(&t.opts).map_err(|e| Error::checkpoint(tmp.display(), e))?;
+    t.cfg.train = serde_json::to_value(&t.opts).map_err(|e| Error::checkpoint(tmp.display(), e))?;
     t.cfg.write(&tmp)?;
     if dir.exists() {
         std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -155,9 +154,9 @@ fn reopen_metrics(run: &Path, step: u64) -> Result<std::fs::File> {
 }
 
 pub(super) fn resume(run: &Path, steps: Option<u64>, device: &Device) -> Result<Trainer> {
-    let (step, dir) = checkpoint::list(run)?.pop().ok_or_else(|| {
-        Error::checkpoint(run.display(), "no checkpoints/step_* to resume from")
-    })?;
+    let (step, dir) = checkpoint::list(run)?
+        .pop()
+        .ok_or_else(|| Error::checkpoint(run.display(), "no checkpoints/step_* to resume from"))?;
     let mut cfg = CheckpointConfig::read(&dir)?;
     let cfg_path = dir.join(checkpoint::CONFIG_FILE);
     let mut opts: TrainOptions = serde_json::from_value(cfg.train.clone())
@@ -182,7 +181,11 @@ pub(super) fn resume(run: &Path, steps: Option<u64>, device: &Device) -> Result<
     let ts_path = dir.join(checkpoint::TRAIN_STATE_FILE);
     let mut ts = checkpoint::read_tensors(&ts_path, device)?;
     let mut raw = HashMap::new();
-    let keys: Vec<String> = ts.keys().filter(|k| k.starts_with("params.")).cloned().collect();
+    let keys: Vec<String> = ts
+        .keys()
+        .filter(|k| k.starts_with("params."))
+        .cloned()
+        .collect();
     for k in keys {
         if let Some(v) = ts.remove(&k) {
             raw.insert(k["params.".len()..].to_string(), v);
@@ -196,12 +199,8 @@ pub(super) fn resume(run: &Path, steps: Option<u64>, device: &Device) -> Result<
     let (model, params) = ScaleDp::from_tensors(&cfg.model, raw, &ts_name, device)?;
     let model_path = dir.join(checkpoint::MODEL_FILE);
     let ema_t = checkpoint::read_tensors(&model_path, device)?;
-    let (ema_model, ema_params) = ScaleDp::from_tensors(
-        &cfg.model,
-        ema_t,
-        &model_path.display().to_string(),
-        device,
-    )?;
+    let (ema_model, ema_params) =
+        ScaleDp::from_tensors(&cfg.model, ema_t, &model_path.display().to_string(), device)?;
     let mut optim = AdamW::new(params, opts.adamw)?;
     optim.load_state(&optim_state, step, &ts_name)?;
     cfg.step = step;

@@ -141,7 +141,11 @@ fn open_loaders(dataset: &str, o: &TrainOptions) -> Result<(Loader, Option<Loade
         }
         l
     };
-    let train_split = if o.val_ratio > 0.0 { Split::Train } else { Split::All };
+    let train_split = if o.val_ratio > 0.0 {
+        Split::Train
+    } else {
+        Split::All
+    };
     // Full batches only, unless the split is smaller than one batch.
     let mut loader = base(train_split, true)
         .drop_incomplete_batch(true)
@@ -153,7 +157,10 @@ fn open_loaders(dataset: &str, o: &TrainOptions) -> Result<(Loader, Option<Loade
         match base(Split::Val, true).open(dataset) {
             Ok(v) => Some(v),
             Err(scaledp_datasets::Error::Options(m)) if m.contains("no samples") => {
-                tracing::warn!("{dataset}: no validation episodes at val_ratio {}", o.val_ratio);
+                tracing::warn!(
+                    "{dataset}: no validation episodes at val_ratio {}",
+                    o.val_ratio
+                );
                 None
             }
             Err(e) => return Err(e.into()),
@@ -175,7 +182,9 @@ impl Trainer {
             )));
         }
         if opts.steps == 0 || opts.batch_size == 0 {
-            return Err(Error::Config("steps and batch size must be at least 1".into()));
+            return Err(Error::Config(
+                "steps and batch size must be at least 1".into(),
+            ));
         }
         let (loader, val) = open_loaders(dataset, &opts)?;
         let cfg = checkpointing::config_for(dataset, &loader, &opts)?;
@@ -200,6 +209,13 @@ impl Trainer {
             stop: Arc::new(AtomicBool::new(false)),
             last_checkpoint: None,
         })
+    }
+
+    /// The configuration a run on `dataset` with `opts` would get (inputs, model, normalizer),
+    /// without building the model: for dry runs and parameter counts.
+    pub fn plan(dataset: &str, opts: &TrainOptions) -> Result<CheckpointConfig> {
+        let (loader, _) = open_loaders(dataset, opts)?;
+        checkpointing::config_for(dataset, &loader, opts)
     }
 
     /// Continues the run in `run` from its latest checkpoint: same weights, optimizer state,
@@ -269,7 +285,12 @@ impl Trainer {
         let wait = t0.elapsed().as_secs_f64();
         check_finite(&batch)?;
         let mut rng = step_rng(self.opts.seed, self.step);
-        let lr = cosine_lr(self.opts.lr, self.step, self.opts.warmup_steps, self.opts.steps);
+        let lr = cosine_lr(
+            self.opts.lr,
+            self.step,
+            self.opts.warmup_steps,
+            self.opts.steps,
+        );
         let (loss, grads) = self.loss_and_grads(&batch, &mut rng)?;
         if !loss.is_finite() {
             return Err(Error::Diverged {
@@ -361,7 +382,11 @@ impl Trainer {
             .map(|_| rng.random_range(0..self.scheduler.train_steps()))
             .collect();
         let noise = Tensor::from_vec(randn(rng, n * ch * a), (n, ch, a), dev)?;
-        let x0 = Tensor::from_slice(&batch.action[s0 * ch * a..(s0 + n) * ch * a], (n, ch, a), dev)?;
+        let x0 = Tensor::from_slice(
+            &batch.action[s0 * ch * a..(s0 + n) * ch * a],
+            (n, ch, a),
+            dev,
+        )?;
         let noisy = self.scheduler.add_noise(&x0, &noise, &t)?;
         let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
         let eps = self.model.predict_noise(&noisy, &tf, &cond)?;

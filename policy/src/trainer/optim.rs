@@ -172,7 +172,11 @@ impl AdamW {
                 if t.dims() != p.var.as_tensor().dims() {
                     return Err(Error::checkpoint(
                         file,
-                        format!("{name} has shape {:?}, the parameter {:?}", t.dims(), p.var.dims()),
+                        format!(
+                            "{name} has shape {:?}, the parameter {:?}",
+                            t.dims(),
+                            p.var.dims()
+                        ),
                     ));
                 }
                 Ok(t.to_device(p.var.device())?)

@@ -62,13 +62,19 @@ pub(super) fn run(
         let dev = model.device();
         let cond = model.encode(&batch.images, &batch.state, b, Crop::Center, &mut rng)?;
         // Denoising loss at random timesteps.
-        let t: Vec<usize> = (0..b).map(|_| rng.random_range(0..train.train_steps())).collect();
+        let t: Vec<usize> = (0..b)
+            .map(|_| rng.random_range(0..train.train_steps()))
+            .collect();
         let noise = Tensor::from_vec(randn(&mut rng, b * ch * a), (b, ch, a), dev)?;
         let x0 = Tensor::from_slice(&batch.action, (b, ch, a), dev)?;
         let noisy = train.add_noise(&x0, &noise, &t)?;
         let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
         let eps = model.predict_noise(&noisy, &tf, &cond)?;
-        let err = (eps - noise)?.sqr()?.sum_keepdim(2)?.flatten_all()?.to_vec1::<f32>()?;
+        let err = (eps - noise)?
+            .sqr()?
+            .sum_keepdim(2)?
+            .flatten_all()?
+            .to_vec1::<f32>()?;
         // Full samples against the recorded chunks.
         let pred = ddim_sample(model, &ddim, &cond, &mut rng)?
             .flatten_all()?

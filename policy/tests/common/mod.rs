@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use arrow_array::builder::{FixedSizeListBuilder, Float32Builder};
-use arrow_array::{ArrayRef, BinaryArray, Float32Array, Int64Array, RecordBatch, StringArray, StructArray};
+use arrow_array::{
+    ArrayRef, BinaryArray, Float32Array, Int64Array, RecordBatch, StringArray, StructArray,
+};
 use arrow_schema::{DataType, Field, Fields};
 use parquet::arrow::ArrowWriter;
 use scaledp_policy::TrainOptions;
@@ -65,7 +67,11 @@ fn png(w: u32, h: u32, e: usize, f: usize, c: usize) -> Vec<u8> {
     out.into_inner()
 }
 
-fn vectors(rows: &[(usize, usize)], dim: usize, f: impl Fn(usize, usize, usize) -> f32) -> ArrayRef {
+fn vectors(
+    rows: &[(usize, usize)],
+    dim: usize,
+    f: impl Fn(usize, usize, usize) -> f32,
+) -> ArrayRef {
     let mut b = FixedSizeListBuilder::new(Float32Builder::new(), dim as i32);
     for &(e, fr) in rows {
         for d in 0..dim {
@@ -128,14 +134,21 @@ pub fn write(fx: &Fixture) -> Written {
     let ts: Vec<f32> = rows.iter().map(|&(_, f)| f as f32 / 10.0).collect();
     cols.push(("timestamp".into(), Arc::new(Float32Array::from(ts))));
     let i64s = |v: Vec<i64>| -> ArrayRef { Arc::new(Int64Array::from(v)) };
-    cols.push(("frame_index".into(), i64s(rows.iter().map(|r| r.1 as i64).collect())));
-    cols.push(("episode_index".into(), i64s(rows.iter().map(|r| r.0 as i64).collect())));
+    cols.push((
+        "frame_index".into(),
+        i64s(rows.iter().map(|r| r.1 as i64).collect()),
+    ));
+    cols.push((
+        "episode_index".into(),
+        i64s(rows.iter().map(|r| r.0 as i64).collect()),
+    ));
     cols.push(("index".into(), i64s((0..rows.len() as i64).collect())));
     cols.push(("task_index".into(), i64s(vec![0; rows.len()])));
     let all = RecordBatch::try_from_iter(cols).unwrap();
     let path = root.join("data/chunk-000/file-000.parquet");
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    let mut wr = ArrowWriter::try_new(std::fs::File::create(&path).unwrap(), all.schema(), None).unwrap();
+    let mut wr =
+        ArrowWriter::try_new(std::fs::File::create(&path).unwrap(), all.schema(), None).unwrap();
     let mut start = 0;
     for &l in &fx.lens {
         wr.write(&all.slice(start, l)).unwrap();
@@ -147,11 +160,19 @@ pub fn write(fx: &Fixture) -> Written {
     Written { dir, root }
 }
 
-fn stats(rows: &[(usize, usize)], dim: usize, f: fn(usize, usize, usize) -> f32) -> serde_json::Value {
+fn stats(
+    rows: &[(usize, usize)],
+    dim: usize,
+    f: fn(usize, usize, usize) -> f32,
+) -> serde_json::Value {
     let col = |d: usize| rows.iter().map(move |&(e, fr)| f64::from(f(e, fr, d)));
     let n = rows.len() as f64;
-    let min: Vec<f64> = (0..dim).map(|d| col(d).fold(f64::INFINITY, f64::min)).collect();
-    let max: Vec<f64> = (0..dim).map(|d| col(d).fold(f64::NEG_INFINITY, f64::max)).collect();
+    let min: Vec<f64> = (0..dim)
+        .map(|d| col(d).fold(f64::INFINITY, f64::min))
+        .collect();
+    let max: Vec<f64> = (0..dim)
+        .map(|d| col(d).fold(f64::NEG_INFINITY, f64::max))
+        .collect();
     let mean: Vec<f64> = (0..dim).map(|d| col(d).sum::<f64>() / n).collect();
     let std: Vec<f64> = (0..dim)
         .map(|d| (col(d).map(|v| (v - mean[d]).powi(2)).sum::<f64>() / n).sqrt())
@@ -178,9 +199,15 @@ fn write_meta(fx: &Fixture, root: &Path, rows: &[(usize, usize)]) {
         serde_json::json!({"dtype": "float32", "shape": [fx.action_dim], "names": names("a", fx.action_dim)}),
     );
     for k in ["frame_index", "episode_index", "index", "task_index"] {
-        features.insert(k.into(), serde_json::json!({"dtype": "int64", "shape": [1], "names": null}));
+        features.insert(
+            k.into(),
+            serde_json::json!({"dtype": "int64", "shape": [1], "names": null}),
+        );
     }
-    features.insert("timestamp".into(), serde_json::json!({"dtype": "float32", "shape": [1], "names": null}));
+    features.insert(
+        "timestamp".into(),
+        serde_json::json!({"dtype": "float32", "shape": [1], "names": null}),
+    );
     let info = serde_json::json!({
         "codebase_version": "v3.0",
         "robot_type": "test_arm",
@@ -202,8 +229,16 @@ fn write_meta(fx: &Fixture, root: &Path, rows: &[(usize, usize)]) {
         "action": stats(rows, fx.action_dim, action),
     });
     std::fs::create_dir_all(root.join("meta")).unwrap();
-    std::fs::write(root.join("meta/info.json"), serde_json::to_vec_pretty(&info).unwrap()).unwrap();
-    std::fs::write(root.join("meta/stats.json"), serde_json::to_vec_pretty(&stats).unwrap()).unwrap();
+    std::fs::write(
+        root.join("meta/info.json"),
+        serde_json::to_vec_pretty(&info).unwrap(),
+    )
+    .unwrap();
+    std::fs::write(
+        root.join("meta/stats.json"),
+        serde_json::to_vec_pretty(&stats).unwrap(),
+    )
+    .unwrap();
 }
 
 /// A tiny model and run: 2-block denoiser of width 32, ResNet trunks of width 8, no

@@ -2,9 +2,11 @@
 
 mod convert;
 mod demo;
+pub(crate) mod predict;
 mod record;
 mod recover;
 mod sim;
+pub(crate) mod train;
 
 use anyhow::Result;
 
@@ -23,6 +25,8 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
             file_size_mb,
         }) => convert::merge(&inputs, &out, file_size_mb),
         Command::Bench(cmd) => scaledp_bench::run(cmd).map(ExitStatus::from),
+        Command::Train(args) => train::run(args),
+        Command::Predict(args) => predict::run(args),
         Command::Demo(args) => demo::run(args),
     }
 }

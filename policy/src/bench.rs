@@ -1,0 +1,169 @@
+//! Measurements for `scaledp bench train`: training throughput and the share of step time spent
+//! waiting for the loader, the same model in PyTorch from the same initial weights, and DDIM
+//! latency per action chunk.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use candle_core::Device;
+use rand::SeedableRng;
+
+use crate::checkpoint;
+use crate::config::ModelConfig;
+use crate::error::{Error, Result};
+use crate::inference::ddim_sample;
+use crate::model::{Crop, ScaleDp};
+use crate::scheduler::NoiseScheduler;
+use crate::trainer::{TrainOptions, Trainer};
+
+/// Training throughput of one configuration.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TrainThroughput {
+    /// Samples per step.
+    pub batch_size: usize,
+    /// Steps timed (after the warm-up ones).
+    pub steps: usize,
+    /// Mean wall time of a step (s).
+    pub step_s: f64,
+    /// Samples per second.
+    pub samples_per_s: f64,
+    /// Share of step time spent waiting for the loader.
+    pub data_wait_share: f64,
+    /// Parameters: encoders, denoiser.
+    pub params: (usize, usize),
+}
+
+/// Trains `steps` steps (after `warmup` untimed ones) on `dataset` with `opts` into a scratch
+/// directory and reports the throughput. The run's initial weights are those of
+/// `opts`' seed, so [`write_torch_case`] can hand PyTorch the same ones.
+pub fn train_throughput(
+    dataset: &str,
+    opts: TrainOptions,
+    warmup: usize,
+    steps: usize,
+    device: &Device,
+) -> Result<TrainThroughput> {
+    let dir = std::env::temp_dir().join(format!("scaledp-bench-train-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let opts = opts
+        .steps((warmup + steps) as u64 + 1)
+        .val_every(0)
+        .checkpoint_every(0);
+    let mut t = Trainer::new(dataset, &dir, opts, device)?;
+    for _ in 0..warmup {
+        t.step()?;
+    }
+    let (mut busy, mut wait, mut samples) = (0f64, 0f64, 0usize);
+    for _ in 0..steps {
+        let r = t.step()?;
+        busy += r.step_s;
+        wait += r.data_wait_s;
+        samples += r.samples;
+    }
+    let counts = ScaleDp::count(&t.config().model)?;
+    let _ = std::fs::remove_dir_all(&dir);
+    let n = steps.max(1) as f64;
+    Ok(TrainThroughput {
+        batch_size: t.options().get_batch_size(),
+        steps,
+        step_s: busy / n,
+        samples_per_s: samples as f64 / busy.max(1e-9),
+        data_wait_share: wait / busy.max(1e-9),
+        params: (counts.encoders, counts.denoiser),
+    })
+}
+
+/// Writes `config.json` (checkpoint style) and `model.safetensors` with the initial weights a
+/// run of `cfg` seeded by `seed` starts from, for `tests/py/bench_train_torch.py`.
+pub fn write_torch_case(dir: &Path, cfg: &ModelConfig, seed: u64) -> Result<(PathBuf, PathBuf)> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let model = ScaleDp::new(cfg, seed, &Device::Cpu)?;
+    let weights = dir.join(checkpoint::MODEL_FILE);
+    model.save(&weights)?;
+    let config = dir.join(checkpoint::CONFIG_FILE);
+    let v = serde_json::json!({"model": cfg});
+    std::fs::write(&config, v.to_string()).map_err(|e| Error::io(&config, e))?;
+    Ok((config, weights))
+}
+
+/// Runs `tests/py/bench_train_torch.py` with `python` and returns its JSON report (which says
+/// `"error": "torch not installed"` when that is so).
+pub fn torch_train_throughput(
+    python: &Path,
+    script: &Path,
+    case: (&Path, &Path),
+    batch_size: usize,
+    steps: usize,
+    threads: usize,
+) -> Result<serde_json::Value> {
+    let out = std::process::Command::new(python)
+        .arg(script)
+        .arg(case.0)
+        .arg(case.1)
+        .args(["--batch", &batch_size.to_string()])
+        .args(["--steps", &steps.to_string()])
+        .args(["--threads", &threads.to_string()])
+        .output()
+        .map_err(|e| Error::io(python, e))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or("");
+    serde_json::from_str(line).map_err(|_| {
+        Error::Config(format!(
+            "{}: no JSON report ({})",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        ))
+    })
+}
+
+/// DDIM latency of one action chunk (batch 1: encoders once, the denoiser once per step).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Latency {
+    /// Chunks timed.
+    pub runs: usize,
+    /// Median (ms).
+    pub p50_ms: f64,
+    /// 99th percentile (ms).
+    pub p99_ms: f64,
+}
+
+/// Times `runs` DDIM samples (after 2 untimed) of a model of `cfg` with random weights.
+pub fn ddim_latency(
+    cfg: &ModelConfig,
+    steps: usize,
+    runs: usize,
+    device: &Device,
+) -> Result<Latency> {
+    let model = ScaleDp::random(cfg, 0, 0.02, device)?;
+    let mut sched = NoiseScheduler::new(100)?;
+    sched.set_timesteps(steps)?;
+    let n_img =
+        cfg.obs_horizon * cfg.cameras.len() * 3 * (cfg.image_width * cfg.image_height) as usize;
+    let images: Vec<u8> = (0..n_img).map(|i| (i % 251) as u8).collect();
+    let state = vec![0.1f32; cfg.obs_horizon * cfg.state_dim];
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    let mut times = Vec::with_capacity(runs);
+    for i in 0..runs + 2 {
+        let t0 = Instant::now();
+        let cond = model.encode(&images, &state, 1, Crop::Center, &mut rng)?;
+        let x = ddim_sample(&model, &sched, &cond, &mut rng)?;
+        x.flatten_all()?.to_vec1::<f32>()?;
+        if i >= 2 {
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    let at = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    Ok(Latency {
+        runs,
+        p50_ms: at(0.5),
+        p99_ms: at(0.99),
+    })
+}

@@ -1,0 +1,243 @@
+//! `scaledp train`: a ScaleDP policy on a LeRobot dataset (the `scaledp-policy` trainer), with a
+//! progress bar on stderr; every step's figures go to `<out>/metrics.jsonl`.
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use scaledp_policy::model::ScaleDp;
+use scaledp_policy::{Event, ModelConfig, ModelSize, TrainOptions, Trainer};
+
+use crate::cli::ExitStatus;
+
+/// `scaledp train`.
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// The dataset: a directory or s3://bucket/prefix (not needed with --resume, or with
+    /// --dry-run for the paper's setup).
+    pub dataset: Option<String>,
+    /// Model size: ti, s, b, l or h.
+    #[arg(long, default_value = "ti")]
+    pub model: String,
+    /// Run directory (metrics.jsonl, checkpoints/step_*).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Continue the run in this directory from its latest checkpoint.
+    #[arg(long, value_name = "DIR", conflicts_with = "out")]
+    pub resume: Option<PathBuf>,
+    /// Optimizer steps in total.
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Samples per step.
+    #[arg(long, default_value_t = 64)]
+    pub batch_size: usize,
+    /// Forward/backward at most this many samples at a time (same update, less memory).
+    #[arg(long)]
+    pub micro_batch: Option<usize>,
+    /// Peak learning rate (cosine schedule after the warm-up).
+    #[arg(long, default_value_t = 1e-4)]
+    pub lr: f64,
+    /// Warm-up steps.
+    #[arg(long, default_value_t = 500)]
+    pub warmup_steps: u64,
+    /// Seed of the weights, data order, crops and noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// cpu, or cuda (a build with the `cuda` feature of scaledp-policy).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+    /// Checkpoint every N steps (and at the end).
+    #[arg(long, default_value_t = 1000)]
+    pub checkpoint_every: u64,
+    /// Validate every N steps (0: never).
+    #[arg(long, default_value_t = 1000)]
+    pub val_every: u64,
+    /// Fraction of episodes held out for validation.
+    #[arg(long, default_value_t = 0.05)]
+    pub val_ratio: f64,
+    /// Clip the global gradient norm.
+    #[arg(long)]
+    pub grad_clip: Option<f64>,
+    /// Crop side / image side (random in training, centred in inference).
+    #[arg(long, default_value_t = 0.9)]
+    pub crop: f64,
+    /// Observation frames per sample, To.
+    #[arg(long, default_value_t = 2)]
+    pub obs_horizon: usize,
+    /// Actions per chunk, C.
+    #[arg(long, default_value_t = 16)]
+    pub action_chunk: usize,
+    /// Resize images to WxH before the crop (e.g. 84x84).
+    #[arg(long, value_name = "WxH")]
+    pub image_size: Option<String>,
+    /// Cameras to use, comma-separated short names (default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub cameras: Vec<String>,
+    /// Print the parameter counts and stop.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+fn size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once('x')
+        .context("--image-size takes WxH, e.g. 84x84")?;
+    Ok((w.parse()?, h.parse()?))
+}
+
+/// The device named on the command line.
+pub(super) fn device(name: &str) -> Result<candle_core::Device> {
+    match name {
+        "cpu" => Ok(candle_core::Device::Cpu),
+        "cuda" => candle_core::Device::new_cuda(0)
+            .context("--device cuda needs a build with `--features scaledp-policy/cuda` and a GPU"),
+        other => bail!("--device {other}: cpu or cuda"),
+    }
+}
+
+fn options(a: &TrainArgs, model: ModelSize) -> Result<TrainOptions> {
+    let mut o = TrainOptions::default()
+        .model(model)
+        .batch_size(a.batch_size)
+        .lr(a.lr)
+        .warmup_steps(a.warmup_steps)
+        .seed(a.seed)
+        .checkpoint_every(a.checkpoint_every)
+        .val_every(a.val_every)
+        .val_ratio(a.val_ratio)
+        .crop(a.crop)
+        .obs_horizon(a.obs_horizon)
+        .action_chunk(a.action_chunk);
+    if let Some(s) = a.steps {
+        o = o.steps(s);
+    }
+    if let Some(m) = a.micro_batch {
+        o = o.micro_batch(m);
+    }
+    if let Some(c) = a.grad_clip {
+        o = o.grad_clip(c);
+    }
+    if let Some(s) = &a.image_size {
+        let (w, h) = size(s)?;
+        o = o.image_size(w, h);
+    }
+    if !a.cameras.is_empty() {
+        o = o.cameras(a.cameras.clone());
+    }
+    Ok(o)
+}
+
+fn print_counts(what: &str, cfg: &ModelConfig) -> Result<()> {
+    let n = ScaleDp::count(cfg)?;
+    let (cw, ch) = cfg.crop_size();
+    println!(
+        "{what}: ScaleDP-{} (depth {}, width {}, heads {}), {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}",
+        cfg.size.map_or("custom".into(), |s| s.to_string()),
+        cfg.depth, cfg.hidden, cfg.heads, cfg.cameras.len(), cfg.image_width, cfg.image_height,
+        cfg.state_dim, cfg.action_dim, cfg.obs_horizon, cfg.action_chunk
+    );
+    println!(
+        "denoiser parameters: {} ({:.2} M)",
+        n.denoiser,
+        n.denoiser as f64 / 1e6
+    );
+    println!(
+        "encoder parameters:  {} ({:.2} M = {} cameras x {:.2} M)",
+        n.encoders,
+        n.encoders as f64 / 1e6,
+        cfg.cameras.len(),
+        n.encoder_per_camera as f64 / 1e6
+    );
+    println!(
+        "total parameters:    {} ({:.2} M)",
+        n.total(),
+        n.total() as f64 / 1e6
+    );
+    Ok(())
+}
+
+/// Runs `scaledp train`.
+pub fn run(a: TrainArgs) -> Result<ExitStatus> {
+    let model: ModelSize = a.model.parse()?;
+    let dev = device(&a.device)?;
+    let opts = options(&a, model)?;
+    let mut trainer = match (&a.resume, &a.dataset) {
+        (Some(run), _) => Trainer::resume(run, a.steps, &dev)?,
+        (None, None) if a.dry_run => {
+            let mut cfg = ModelConfig::paper(model);
+            cfg.obs_horizon = a.obs_horizon;
+            cfg.action_chunk = a.action_chunk;
+            print_counts("paper setup (3 cameras, 14-D state and action)", &cfg)?;
+            return Ok(ExitStatus::Success);
+        }
+        (None, None) => bail!("name a DATASET (or --resume a run)"),
+        (None, Some(ds)) if a.dry_run => {
+            let cfg = Trainer::plan(ds, &opts)?;
+            print_counts(ds, &cfg.model)?;
+            return Ok(ExitStatus::Success);
+        }
+        (None, Some(ds)) => {
+            let out = a
+                .out
+                .as_ref()
+                .context("--out DIR is needed for a new run")?;
+            Trainer::new(ds, out, opts, &dev)?
+        }
+    };
+    if a.dry_run {
+        print_counts(&trainer.config().dataset, &trainer.config().model)?;
+        return Ok(ExitStatus::Success);
+    }
+    let stop = trainer.stop_flag();
+    let int = super::interrupt_flag();
+    let total = trainer.options().get_steps();
+    let bar = indicatif::ProgressBar::new(total).with_position(trainer.step_count());
+    bar.set_style(indicatif::ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
+    )?);
+    let (mut wait, mut busy) = (0f64, 0f64);
+    let summary = trainer.run(|e| {
+        if int.load(Ordering::Relaxed) {
+            stop.store(true, Ordering::Relaxed);
+        }
+        match e {
+            Event::Step(r) => {
+                wait += r.data_wait_s;
+                busy += r.step_s;
+                bar.set_position(r.step);
+                bar.set_message(format!(
+                    "loss {:.4}  lr {:.2e}  {:.1} samples/s  data wait {:.0} %",
+                    r.loss,
+                    r.lr,
+                    r.samples as f64 / r.step_s.max(1e-9),
+                    100.0 * wait / busy.max(1e-9)
+                ));
+            }
+            Event::Validation(v) => bar.println(format!(
+                "step {}: val loss {:.4}, action MSE {:.4} (normalized), MAE per dim {:?}",
+                v.step,
+                v.loss,
+                v.action_mse,
+                v.action_names
+                    .iter()
+                    .zip(&v.action_mae_raw)
+                    .map(|(n, e)| format!("{n} {e:.4}"))
+                    .collect::<Vec<_>>()
+            )),
+            Event::Checkpoint(p) => bar.println(format!("checkpoint {}", p.display())),
+        }
+    })?;
+    bar.finish_and_clear();
+    println!(
+        "{} steps, final loss {}, data wait {:.1} % of step time, checkpoint {}",
+        summary.steps,
+        summary.final_loss.map_or("-".into(), |l| format!("{l:.4}")),
+        100.0 * summary.data_wait_share,
+        summary
+            .checkpoint
+            .as_ref()
+            .map_or("-".into(), |p| p.display().to_string())
+    );
+    Ok(ExitStatus::Success)
+}
