@@ -182,6 +182,7 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                         urdf: None,
                         tcp_xyz_rpy: None,
                         command_topic: None,
+                        command_type: None,
                     });
                 } else if let Some(f) = js.name.iter().find(|n| n.ends_with("finger_joint1")) {
                     let prefix = f.trim_end_matches("finger_joint1").to_string();
@@ -198,6 +199,7 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                             topic: t.topic.clone(),
                             joint_names: names,
                             rate_hz: rate,
+                            command_topic: None,
                         },
                     ));
                 } else if let Some(k) = js
@@ -215,6 +217,7 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                             topic: t.topic.clone(),
                             joint_names: vec![k.clone()],
                             rate_hz: rate,
+                            command_topic: None,
                         },
                     ));
                 }

@@ -53,6 +53,31 @@ pub struct Arm {
     /// `geometry_msgs/PoseStamped` target or a leader arm's `sensor_msgs/JointState`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub command_topic: Option<String>,
+    /// What `command_topic` carries (default: a `PoseStamped` TCP target in the base frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_type: Option<CommandType>,
+}
+
+/// The message type of an arm's command topic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CommandType {
+    /// `geometry_msgs/msg/PoseStamped`: the TCP target in the arm's base frame, as a Cartesian
+    /// controller (e.g. cartesian_motion_controller's `target_frame`) takes it.
+    #[default]
+    PoseStamped,
+    /// `sensor_msgs/msg/JointState`: a leader arm's joints, named as the follower's.
+    JointState,
+}
+
+impl CommandType {
+    /// The full ROS 2 type name.
+    pub fn message_type(self) -> &'static str {
+        match self {
+            Self::PoseStamped => "geometry_msgs/msg/PoseStamped",
+            Self::JointState => "sensor_msgs/msg/JointState",
+        }
+    }
 }
 
 /// A URDF serial chain for forward kinematics.
@@ -113,6 +138,10 @@ pub struct Gripper {
     pub joint_names: Vec<String>,
     /// Publish rate (Hz).
     pub rate_hz: f64,
+    /// A `sensor_msgs/JointState` topic of finger targets (the gripper's own joint names and
+    /// units, as a leader gripper publishes them); the action's gripper value when set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_topic: Option<String>,
 }
 
 /// Camera hardware, which fixes the raw encoding its ROS 2 wrapper publishes.
@@ -194,6 +223,11 @@ const BUILTIN: &[(&str, &str)] = &[
         "bimanual_ur5_3rs",
         include_str!("../../rigs/bimanual_ur5_3rs.toml"),
     ),
+    ("franka_sim", include_str!("../../rigs/franka_sim.toml")),
+    (
+        "bimanual_ur5_sim",
+        include_str!("../../rigs/bimanual_ur5_sim.toml"),
+    ),
 ];
 
 /// A finite rate or size above zero.
@@ -222,7 +256,9 @@ impl Rig {
         Ok(rig)
     }
 
-    /// The rigs shipped in `rigs/`, by name: `franka_2zed`, `bimanual_ur5_3rs`.
+    /// The rigs shipped in `rigs/`, by name: `franka_2zed`, `bimanual_ur5_3rs`, and their
+    /// simulated task cells with command topics and smaller images, `franka_sim` and
+    /// `bimanual_ur5_sim`.
     pub fn builtin(name: &str) -> Option<Self> {
         let (_, text) = BUILTIN.iter().find(|(n, _)| *n == name)?;
         Self::parse(text, &PathBuf::from(format!("rigs/{name}.toml"))).ok()
@@ -244,7 +280,10 @@ impl Rig {
         Self::load(path)
     }
 
-    /// Every topic of the rig, cameras first, sorted within each kind as declared.
+    /// Every topic of the rig, in this order: cameras, then each arm's joint states and gripper
+    /// states, then each arm's command topics (arm, then gripper), all as declared. Command
+    /// topics carry the rig's control rate as their nominal rate (a policy commands at that
+    /// rate; a leader device may publish faster).
     pub fn topics(&self) -> Vec<TopicSpec> {
         let mut out: Vec<TopicSpec> = self
             .cameras
@@ -268,6 +307,32 @@ impl Rig {
                     topic: g.topic.clone(),
                     message_type: "sensor_msgs/msg/JointState",
                     rate_hz: g.rate_hz,
+                    is_image: false,
+                });
+            }
+        }
+        out.extend(self.command_topics());
+        out
+    }
+
+    /// The command topics alone (the tail of [`Self::topics`]): per arm, its `command_topic`
+    /// and its gripper's `command_topic`.
+    pub fn command_topics(&self) -> Vec<TopicSpec> {
+        let mut out = Vec::new();
+        for arm in &self.arms {
+            if let Some(topic) = &arm.command_topic {
+                out.push(TopicSpec {
+                    topic: topic.clone(),
+                    message_type: arm.command_type.unwrap_or_default().message_type(),
+                    rate_hz: self.control_rate_hz,
+                    is_image: false,
+                });
+            }
+            if let Some(topic) = arm.gripper.as_ref().and_then(|g| g.command_topic.as_ref()) {
+                out.push(TopicSpec {
+                    topic: topic.clone(),
+                    message_type: "sensor_msgs/msg/JointState",
+                    rate_hz: self.control_rate_hz,
                     is_image: false,
                 });
             }
@@ -371,6 +436,47 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("x.toml: "), "{e}");
+    }
+
+    #[test]
+    fn command_topics_come_last_with_their_types() {
+        // The real rigs know no command topics; their simulated cells add one per arm and
+        // gripper, after every state topic, so existing topic indices keep their meaning.
+        for (real, sim) in [
+            ("franka_2zed", "franka_sim"),
+            ("bimanual_ur5_3rs", "bimanual_ur5_sim"),
+        ] {
+            let (real, sim) = (Rig::builtin(real).unwrap(), Rig::builtin(sim).unwrap());
+            assert!(real.command_topics().is_empty());
+            let n = real.topics().len();
+            let topics = sim.topics();
+            assert_eq!(topics.len(), n + 2 * sim.arms.len());
+            for (a, b) in real.topics().iter().zip(&topics) {
+                assert_eq!((&a.topic, a.message_type), (&b.topic, b.message_type));
+            }
+            assert_eq!(&topics[n..], sim.command_topics().as_slice());
+            for pair in topics[n..].chunks(2) {
+                assert_eq!(pair[0].message_type, "geometry_msgs/msg/PoseStamped");
+                assert_eq!(pair[1].message_type, "sensor_msgs/msg/JointState");
+                assert_eq!(pair[0].rate_hz, sim.control_rate_hz);
+            }
+        }
+        let leader = include_str!("../../rigs/franka_sim.toml").replace(
+            "command_topic = \"/cartesian_motion_controller/target_frame\"",
+            "command_topic = \"/leader/joint_states\"\ncommand_type = \"joint_state\"",
+        );
+        let rig = Rig::parse(&leader, Path::new("leader.toml")).unwrap();
+        assert_eq!(rig.arms[0].command_type, Some(CommandType::JointState));
+        assert_eq!(
+            rig.command_topics()[0].message_type,
+            "sensor_msgs/msg/JointState"
+        );
+        // A command topic may not reuse a state topic.
+        let clash = include_str!("../../rigs/franka_sim.toml").replace(
+            "/leader/franka_gripper/joint_states",
+            "/franka_gripper/joint_states",
+        );
+        assert!(Rig::parse(&clash, Path::new("clash.toml")).is_err());
     }
 
     #[test]
