@@ -1,12 +1,28 @@
-//! Draws what a camera of the rig would see: a checkered table, each arm's links, its gripper
-//! fingers at their current opening, and the cube, all projected through a pinhole model. Crude
-//! next to a photo, but every pixel follows from the simulated state, so images and actions
-//! are correlated the way a policy needs.
+//! Draws what a camera of the rig would see: a checkered table with each cube's target marker,
+//! the cubes (shaded faces, a shadow when lifted), each arm's links and its gripper fingers at
+//! their current opening, all projected through a pinhole model. Crude next to a photo, but
+//! every pixel follows from the simulated state, so images and actions are correlated the way a
+//! policy needs; colours are chosen to stay distinct after downscaling to 96 × 96.
 
 use glam::{DMat3, DMat4, DVec3};
-use scaledp_schema::rig::Camera;
+use scaledp_schema::rig::{Camera, CameraModel};
 
-use crate::scene::{Scene, SceneState};
+use crate::scene::{Scene, CUBE_HALF_M, TABLE_Z_M};
+use crate::world::WorldState;
+
+/// Cube colours (red, blue), lit top face first then the two side shades.
+pub const CUBE_RGB: [[[u8; 3]; 3]; 2] = [
+    [[235, 45, 40], [190, 30, 28], [145, 20, 20]],
+    [[50, 110, 240], [35, 80, 190], [25, 55, 140]],
+];
+/// Target marker colours (green for the red cube, yellow for the blue one): fill, border.
+pub const TARGET_RGB: [[[u8; 3]; 2]; 2] = [
+    [[60, 200, 80], [20, 110, 35]],
+    [[235, 205, 40], [150, 120, 10]],
+];
+/// Half the side of a target marker (m).
+pub const TARGET_HALF_M: f64 = 0.035;
+const ARM_RGB: [[u8; 3]; 2] = [[225, 228, 232], [170, 175, 185]];
 
 /// Where a camera sits and how it projects (OpenCV convention: z forward, x right, y down).
 #[derive(Debug, Clone, Copy)]
@@ -33,6 +49,16 @@ pub struct View {
     height: usize,
 }
 
+/// Horizontal field of view (rad): a fixed ZED with the 4 mm lens (ZED 2i / ZED X: about 75°),
+/// a ZED Mini on a wrist (about 90°), a RealSense D435's colour sensor (69°).
+pub fn horizontal_fov_rad(model: CameraModel, wrist: bool) -> f64 {
+    match (model, wrist) {
+        (CameraModel::Zed, false) => 75f64.to_radians(),
+        (CameraModel::Zed, true) => 90f64.to_radians(),
+        (CameraModel::Realsense, _) => 69f64.to_radians(),
+    }
+}
+
 fn look_at(eye: DVec3, target: DVec3) -> DMat4 {
     let z = (target - eye).normalize();
     let x = z.cross(DVec3::Z).normalize();
@@ -42,45 +68,52 @@ fn look_at(eye: DVec3, target: DVec3) -> DMat4 {
 
 impl View {
     /// Mounts camera `index` of the rig: a camera whose name contains "wrist" rides on the arm
-    /// whose name it also contains (else the first arm); the others look at the workspace from
-    /// the front, spread sideways.
+    /// whose name it also contains (else the first arm); the others look down at the workspace
+    /// from across the table (facing the arms), spread sideways. The placement never depends on
+    /// the seed.
     pub fn for_camera(scene: &Scene, cam: &Camera, index: usize) -> Self {
-        let hfov = if cam.model == scaledp_schema::rig::CameraModel::Zed {
-            1.75
-        } else {
-            1.2
-        };
+        let arms = scene.arms();
+        let wrist = cam.name.contains("wrist") && !arms.is_empty();
+        let hfov = horizontal_fov_rad(cam.model, wrist);
         let f_px = f64::from(cam.width) / 2.0 / (hfov / 2.0_f64).tan();
-        let arms: Vec<_> = scene.arms().collect();
-        let mount = if cam.name.contains("wrist") && !arms.is_empty() {
+        let mount = if wrist {
             let arm = arms
                 .iter()
-                .position(|(a, _)| cam.name.contains(a.name.as_str()))
+                .position(|a| cam.name.contains(a.arm.name.as_str()))
                 .unwrap_or(0);
-            // 6 cm off the flange axis, tilted towards it, looking along the tool.
-            let flange_from_camera = DMat4::from_translation(DVec3::new(0.09, 0.0, -0.04))
-                * DMat4::from_rotation_y(-0.3);
+            // 9 cm off the flange axis across the fingers, 4 cm behind the flange, tilted
+            // towards the fingertips, which show at the bottom of the picture, left and right.
+            let turn = DMat3::from_mat4(arms[arm].flange_from_fingertips);
+            let flange_from_camera = DMat4::from_mat3(turn)
+                * DMat4::from_translation(DVec3::new(0.09, 0.0, -0.04))
+                * DMat4::from_rotation_z(std::f64::consts::FRAC_PI_2)
+                * DMat4::from_rotation_x(-0.3);
             Mount::Wrist {
                 arm,
                 flange_from_camera,
             }
         } else {
-            let state = scene.state_at(0.0);
-            let n = state.arms.len().max(1) as f64;
-            let target = state.arms.iter().map(|a| a.cube_world).sum::<DVec3>() / n;
-            let bases = state
-                .arms
-                .iter()
-                .map(|a| a.world_from_base.w_axis.truncate())
-                .sum::<DVec3>()
-                / n;
-            let mut out = (target - bases).with_z(0.0);
+            let target = scene.workspace_center();
+            let mut out = (target - scene.bases_center()).with_z(0.0);
             if out.length() < 1e-6 {
                 out = DVec3::X;
             }
-            let side = DVec3::Z.cross(out.normalize()) * (index as f64 * 0.35);
-            let eye = target + out.normalize() * 0.75 + side + DVec3::new(0.0, 0.0, 0.6);
-            Mount::World(look_at(eye, target + DVec3::new(0.0, 0.0, 0.12)))
+            let out = out.normalize();
+            let side = DVec3::Z.cross(out);
+            // Far enough that every work region, plus a margin for the arms, spans 85 % of
+            // the width, looking down at 50°.
+            let half_extent = arms
+                .iter()
+                .map(|a| (a.region_center - target).dot(side).abs() + a.region_half.y)
+                .fold(0.0, f64::max)
+                + 0.22;
+            let distance = half_extent / (hfov / 2.0).tan() / 0.85;
+            let elevation = 50f64.to_radians();
+            let eye = target
+                + out * (distance * elevation.cos())
+                + side * (index as f64 * 0.35)
+                + DVec3::Z * (distance * elevation.sin());
+            Mount::World(look_at(eye, target + DVec3::new(-0.05, 0.0, 0.1)))
         };
         Self {
             mount,
@@ -92,22 +125,43 @@ impl View {
         }
     }
 
-    fn world_from_camera(&self, scene: &Scene, state: &SceneState) -> DMat4 {
+    /// The mount.
+    pub fn mount(&self) -> Mount {
+        self.mount
+    }
+
+    /// `world_from_camera` in `state`.
+    pub fn world_from_camera(&self, scene: &Scene, state: &WorldState) -> DMat4 {
         match self.mount {
             Mount::World(t) => t,
             Mount::Wrist {
                 arm,
                 flange_from_camera,
             } => {
-                let (a, _) = scene
-                    .arms()
-                    .nth(arm)
-                    .unwrap_or_else(|| unreachable!("mounted on an existing arm"));
-                let s = &state.arms[arm];
-                let flange = a.model.base_from_flange(&s.q).unwrap_or(DMat4::IDENTITY);
-                s.world_from_base * flange * flange_from_camera
+                let a = &scene.arms()[arm];
+                a.world_from_base * a.base_from_flange(&state.arms[arm].q) * flange_from_camera
             }
         }
+    }
+
+    /// Pixel (x, y) and depth of world point `p` in `state`, if in front of the camera.
+    pub fn project(&self, scene: &Scene, state: &WorldState, p: DVec3) -> Option<(f64, f64, f64)> {
+        let c = self
+            .world_from_camera(scene, state)
+            .inverse()
+            .transform_point3(p);
+        (c.z > 0.03).then(|| {
+            (
+                self.cx + self.f_px * c.x / c.z,
+                self.cy + self.f_px * c.y / c.z,
+                c.z,
+            )
+        })
+    }
+
+    /// (width, height) in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
     }
 }
 
@@ -138,13 +192,24 @@ impl Canvas<'_> {
         }
     }
 
+    /// Pixel bounds (x0..x1, y0..y1) of a box, clipped to the canvas.
+    fn bounds(&self, lo: (f64, f64), hi: (f64, f64)) -> (usize, usize, usize, usize) {
+        let clip = |v: f64, max: usize| (v.max(0.0) as usize).min(max);
+        (
+            clip(lo.0.floor(), self.width),
+            clip(hi.0.ceil(), self.width),
+            clip(lo.1.floor(), self.height),
+            clip(hi.1.ceil(), self.height),
+        )
+    }
+
     /// A segment of radius `r` pixels from `a` to `b` (pixel coordinates).
     fn segment(&mut self, a: (f64, f64), b: (f64, f64), r: f64, rgb: [u8; 3]) {
         let r = r.clamp(1.0, 60.0);
-        let x0 = (a.0.min(b.0) - r).floor().max(0.0) as usize;
-        let y0 = (a.1.min(b.1) - r).floor().max(0.0) as usize;
-        let x1 = ((a.0.max(b.0) + r).ceil().max(0.0) as usize).min(self.width);
-        let y1 = ((a.1.max(b.1) + r).ceil().max(0.0) as usize).min(self.height);
+        let (x0, x1, y0, y1) = self.bounds(
+            (a.0.min(b.0) - r, a.1.min(b.1) - r),
+            (a.0.max(b.0) + r, a.1.max(b.1) + r),
+        );
         let (dx, dy) = (b.0 - a.0, b.1 - a.1);
         let len2 = (dx * dx + dy * dy).max(1e-9);
         for y in y0..y1 {
@@ -153,6 +218,33 @@ impl Canvas<'_> {
                 let s = ((px * dx + py * dy) / len2).clamp(0.0, 1.0);
                 let (ex, ey) = (px - s * dx, py - s * dy);
                 if ex * ex + ey * ey <= r * r {
+                    self.put(x, y, rgb);
+                }
+            }
+        }
+    }
+
+    /// A filled convex polygon (pixel coordinates, either winding).
+    fn polygon(&mut self, pts: &[(f64, f64)], rgb: [u8; 3]) {
+        let lo = pts
+            .iter()
+            .fold((f64::MAX, f64::MAX), |a, p| (a.0.min(p.0), a.1.min(p.1)));
+        let hi = pts
+            .iter()
+            .fold((f64::MIN, f64::MIN), |a, p| (a.0.max(p.0), a.1.max(p.1)));
+        let (x0, x1, y0, y1) = self.bounds(lo, hi);
+        let n = pts.len();
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                let (mut pos, mut neg) = (false, false);
+                for i in 0..n {
+                    let (a, b) = (pts[i], pts[(i + 1) % n]);
+                    let e = (b.0 - a.0) * (py - a.1) - (b.1 - a.1) * (px - a.0);
+                    pos |= e > 0.0;
+                    neg |= e < 0.0;
+                }
+                if !(pos && neg) {
                     self.put(x, y, rgb);
                 }
             }
@@ -172,17 +264,37 @@ pub fn layout(encoding: &str) -> Option<(usize, [usize; 3])> {
     }
 }
 
-const ARM_RGB: [[u8; 3]; 2] = [[225, 228, 232], [70, 120, 210]];
+/// The table's colour where a ray from `eye` along `d` meets it (or the wall's).
+#[inline]
+fn table_pixel(eye: DVec3, d: DVec3, targets: &[(DVec3, usize)], shadows: &[DVec3]) -> [u8; 3] {
+    if d.z >= -1e-6 {
+        return [182, 196, 210];
+    }
+    let t = (TABLE_Z_M - eye.z) / d.z;
+    let p = eye + d * t;
+    for &(c, k) in targets {
+        let (dx, dy) = ((p.x - c.x).abs(), (p.y - c.y).abs());
+        if dx <= TARGET_HALF_M && dy <= TARGET_HALF_M {
+            let inner = TARGET_HALF_M - 0.006;
+            return TARGET_RGB[k % 2][usize::from(dx > inner || dy > inner)];
+        }
+    }
+    // A faint 15 cm checker: texture for depth, too soft to turn into noise when downscaled.
+    let check = ((p.x / 0.15).floor() as i64 + (p.y / 0.15).floor() as i64) & 1;
+    let mut shade = (1.0 / (1.0 + 0.25 * t)).clamp(0.3, 1.0);
+    if shadows
+        .iter()
+        .any(|s| (p - *s).truncate().length_squared() < 0.03 * 0.03)
+    {
+        shade *= 0.55;
+    }
+    let base = if check == 0 { 168.0 } else { 150.0 };
+    let g = (base * shade) as u8;
+    [g, (f64::from(g) * 0.95) as u8, (f64::from(g) * 0.85) as u8]
+}
 
 /// Renders `state` as camera `view` sees it into `out` (tightly packed rows in `encoding`).
-pub fn render(
-    scene: &Scene,
-    view: &View,
-    state: &SceneState,
-    encoding: &str,
-    table_z: f64,
-    out: &mut Vec<u8>,
-) {
+pub fn render(scene: &Scene, view: &View, state: &WorldState, encoding: &str, out: &mut Vec<u8>) {
     let (channels, order) = layout(encoding).unwrap_or((3, [0, 1, 2]));
     out.resize(view.width * view.height * channels, 0);
     let mut canvas = Canvas {
@@ -196,27 +308,27 @@ pub fn render(
     let rot = DMat3::from_mat4(world_from_camera);
     let eye = world_from_camera.w_axis.truncate();
     let camera_from_world = world_from_camera.inverse();
+    let cubes = &state.task.cubes;
+    let targets: Vec<(DVec3, usize)> = cubes
+        .iter()
+        .enumerate()
+        .map(|(k, c)| (DVec3::from_array(c.target_m), k))
+        .collect();
+    let shadows: Vec<DVec3> = cubes
+        .iter()
+        .map(|c| DVec3::from_array(c.position_m))
+        .filter(|p| p.z > TABLE_Z_M + CUBE_HALF_M + 0.003)
+        .collect();
 
-    // Table: intersect each pixel's ray with the plane z = table_z; a 10 cm checker shaded by
-    // distance, a plain wall where the ray misses.
+    // Table: intersect each pixel's ray with the plane z = TABLE_Z_M; a 10 cm checker shaded by
+    // distance, the target markers and cube shadows on it, a plain wall where the ray misses.
+    let step = rot * DVec3::new(1.0 / view.f_px, 0.0, 0.0);
     for y in 0..view.height {
         let v = (y as f64 + 0.5 - view.cy) / view.f_px;
         let row0 = rot * DVec3::new(-view.cx / view.f_px, v, 1.0);
-        let step = rot * DVec3::new(1.0 / view.f_px, 0.0, 0.0);
         for x in 0..view.width {
             let d = row0 + step * (x as f64 + 0.5);
-            let rgb = if d.z < -1e-6 {
-                let t = (table_z - eye.z) / d.z;
-                let p = eye + d * t;
-                let check = ((p.x * 10.0).floor() as i64 + (p.y * 10.0).floor() as i64) & 1;
-                let shade = (1.0 / (1.0 + 0.25 * t)).clamp(0.3, 1.0);
-                let base = if check == 0 { 150.0 } else { 105.0 };
-                let g = (base * shade) as u8;
-                [g, (f64::from(g) * 0.95) as u8, (f64::from(g) * 0.85) as u8]
-            } else {
-                [182, 196, 210]
-            };
-            canvas.put(x, y, rgb);
+            canvas.put(x, y, table_pixel(eye, d, &targets, &shadows));
         }
     }
 
@@ -237,25 +349,48 @@ pub fn render(
         }
     };
 
-    for (i, ((arm, _), s)) in scene.arms().zip(&state.arms).enumerate() {
-        // The cube (5 cm), drawn as a shaded blob: a near-side face and its outline.
-        let c = s.cube_world;
-        seg(
-            &mut canvas,
-            c - DVec3::new(0.0, 0.0, 0.012),
-            c + DVec3::new(0.0, 0.0, 0.012),
-            0.026,
-            [150, 20, 25],
-        );
-        seg(
-            &mut canvas,
-            c - DVec3::new(0.0, 0.0, 0.01),
-            c + DVec3::new(0.0, 0.0, 0.01),
-            0.021,
-            [215, 40, 45],
-        );
+    // Cubes, the farthest first: each visible face as a filled quad.
+    let mut order: Vec<usize> = (0..cubes.len()).collect();
+    let depth = |k: usize| (DVec3::from_array(cubes[k].position_m) - eye).length();
+    order.sort_by(|a, b| depth(*b).total_cmp(&depth(*a)));
+    for k in order {
+        let c = &cubes[k];
+        let pose = DMat4::from_translation(DVec3::from_array(c.position_m))
+            * DMat4::from_rotation_z(c.yaw_rad);
+        let h = CUBE_HALF_M;
+        for (normal, shade) in [
+            (DVec3::Z, 0),
+            (DVec3::X, 1),
+            (-DVec3::X, 1),
+            (DVec3::Y, 2),
+            (-DVec3::Y, 2),
+        ] {
+            let centre = pose.transform_point3(normal * h);
+            let n = pose.transform_vector3(normal);
+            if n.dot(eye - centre) <= 0.0 {
+                continue;
+            }
+            let (u, w) = if normal.z != 0.0 {
+                (DVec3::X, DVec3::Y)
+            } else {
+                (normal.cross(DVec3::Z), DVec3::Z)
+            };
+            let corners: Option<Vec<(f64, f64)>> =
+                [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                    .iter()
+                    .map(|(a, b)| {
+                        project(pose.transform_point3(normal * h + u * (a * h) + w * (b * h)))
+                            .map(|p| (p.0, p.1))
+                    })
+                    .collect();
+            if let Some(corners) = corners {
+                canvas.polygon(&corners, CUBE_RGB[k % 2][shade]);
+            }
+        }
+    }
 
-        let Ok(frames) = arm.model.frames(&s.q) else {
+    for (i, (layout, s)) in scene.arms().iter().zip(&state.arms).enumerate() {
+        let Ok(frames) = layout.arm.model.frames(&s.q) else {
             continue;
         };
         let mut prev = s.world_from_base.w_axis.truncate();
@@ -266,9 +401,8 @@ pub fn render(
             }
             prev = p;
         }
-        // Gripper: a palm across the tool y axis and two fingers at ± width / 2.
-        let flange = s.world_from_base * frames[frames.len() - 1];
-        let tcp = flange * super::scene::flange_from_fingertips(arm);
+        // Gripper: a palm across the fingertip y axis and two fingers at ± width / 2.
+        let tcp = s.world_from_base * frames[frames.len() - 1] * layout.flange_from_fingertips;
         let (o, y_axis, z_axis) = (
             tcp.w_axis.truncate(),
             tcp.y_axis.truncate(),
@@ -289,231 +423,5 @@ pub fn render(
     }
 }
 
-/// Height of the table: just under the lowest point the cubes are picked from or placed at.
-pub fn table_height(scene: &Scene) -> f64 {
-    let mut z = f64::INFINITY;
-    for k in 0..200 {
-        let s = scene.state_at(k as f64 * 0.2);
-        for a in &s.arms {
-            z = z.min(a.cube_world.z);
-        }
-    }
-    if z.is_finite() {
-        z - 0.03
-    } else {
-        0.0
-    }
-}
-
 #[cfg(test)]
-mod tests {
-    use scaledp_schema::rig::Rig;
-
-    use super::*;
-
-    const CUBE_RGB: [[u8; 3]; 2] = [[215, 40, 45], [150, 20, 25]];
-
-    /// The Franka rig with 160×120 cameras: camera 0 ("front") is fixed in the world, camera 1
-    /// ("wrist") rides on the flange.
-    fn rig() -> Rig {
-        let mut rig = Rig::builtin("franka_2zed").unwrap();
-        for c in &mut rig.cameras {
-            c.width = 160;
-            c.height = 120;
-        }
-        rig
-    }
-
-    fn draw(scene: &Scene, view: &View, state: &SceneState) -> Vec<u8> {
-        let mut out = Vec::new();
-        render(scene, view, state, "rgb8", table_height(scene), &mut out);
-        out
-    }
-
-    fn pixel(img: &[u8], view: &View, (x, y): (f64, f64)) -> [u8; 3] {
-        let i = (y as usize * view.width + x as usize) * 3;
-        [img[i], img[i + 1], img[i + 2]]
-    }
-
-    /// (x, y, depth) of world point `p` in `view`, as the renderer projects it.
-    fn project(scene: &Scene, view: &View, state: &SceneState, p: DVec3) -> (f64, f64, f64) {
-        let c = view
-            .world_from_camera(scene, state)
-            .inverse()
-            .transform_point3(p);
-        assert!(c.z > 0.03, "{p} is behind the camera");
-        (
-            view.cx + view.f_px * c.x / c.z,
-            view.cy + view.f_px * c.y / c.z,
-            c.z,
-        )
-    }
-
-    /// Pixels (x, y) where two images of `view` differ.
-    fn changed(view: &View, a: &[u8], b: &[u8]) -> Vec<(f64, f64)> {
-        (0..view.width * view.height)
-            .filter(|i| a[i * 3..i * 3 + 3] != b[i * 3..i * 3 + 3])
-            .map(|i| ((i % view.width) as f64 + 0.5, (i / view.width) as f64 + 0.5))
-            .collect()
-    }
-
-    fn inside(view: &View, (x, y): (f64, f64)) -> bool {
-        (0.0..view.width as f64).contains(&x) && (0.0..view.height as f64).contains(&y)
-    }
-
-    #[test]
-    fn the_cube_is_drawn_where_it_projects_and_nothing_else_changes() {
-        let rig = rig();
-        let scene = Scene::new(&rig, 1);
-        let view = View::for_camera(&scene, &rig.cameras[0], 0);
-        assert!(matches!(view.mount, Mount::World(_)));
-        let a = scene.state_at(0.0);
-        let mut b = a.clone();
-        b.arms[0].cube_world += DVec3::new(0.0, 0.12, 0.0);
-        let (img_a, img_b) = (draw(&scene, &view, &a), draw(&scene, &view, &b));
-        assert_eq!(img_a.len(), 160 * 120 * 3);
-        assert_eq!(
-            img_a,
-            draw(&scene, &view, &a),
-            "rendering is a pure function"
-        );
-
-        let pa = project(&scene, &view, &a, a.arms[0].cube_world);
-        let pb = project(&scene, &view, &b, b.arms[0].cube_world);
-        for p in [pa, pb] {
-            assert!(inside(&view, (p.0, p.1)), "cube out of view at {p:?}");
-        }
-        assert_eq!(pixel(&img_a, &view, (pa.0, pa.1)), CUBE_RGB[0]);
-        assert_eq!(pixel(&img_b, &view, (pb.0, pb.1)), CUBE_RGB[0]);
-        assert!(!CUBE_RGB.contains(&pixel(&img_b, &view, (pa.0, pa.1))));
-        assert!(!CUBE_RGB.contains(&pixel(&img_a, &view, (pb.0, pb.1))));
-        // Only the cube moved: every changed pixel lies within the cube's drawn radius (plus
-        // its 1.2 cm half-height and a pixel of rounding) of where it was or now is.
-        let changed = changed(&view, &img_a, &img_b);
-        assert!(changed.len() > 10, "{} pixels changed", changed.len());
-        for (x, y) in changed {
-            let near = [pa, pb].iter().any(|&(px, py, depth)| {
-                let r = view.f_px * (0.026 + 0.012) / depth + 1.5;
-                (x - px).hypot(y - py) <= r
-            });
-            assert!(near, "pixel ({x}, {y}) changed, away from the cube");
-        }
-    }
-
-    #[test]
-    fn the_gripper_opening_is_drawn_at_the_fingers() {
-        let rig = rig();
-        let scene = Scene::new(&rig, 1);
-        let view = View::for_camera(&scene, &rig.cameras[0], 0);
-        let open = scene.state_at(0.0);
-        assert!(open.arms[0].gripper_width_m > 0.07);
-        let mut closed = open.clone();
-        closed.arms[0].gripper_width_m = 0.0;
-        let changed = changed(
-            &view,
-            &draw(&scene, &view, &open),
-            &draw(&scene, &view, &closed),
-        );
-        assert!(!changed.is_empty(), "the gripper opening is not drawn");
-        // The fingers run from the palm (5 cm behind the TCP) to the TCP, ± (width / 2 + 8 mm)
-        // along the tool y axis: every changed pixel is within the box of those points
-        // (finger radius 6 mm, palm radius 1 cm, a pixel of rounding).
-        let (arm, _) = scene.arms().next().unwrap();
-        let s = &open.arms[0];
-        let flange = s.world_from_base * arm.model.base_from_flange(&s.q).unwrap();
-        let tcp = flange * super::super::scene::flange_from_fingertips(arm);
-        let (o, y_axis, z_axis) = (
-            tcp.w_axis.truncate(),
-            tcp.y_axis.truncate(),
-            tcp.z_axis.truncate(),
-        );
-        let mut corners = Vec::new();
-        for end in [o, o - z_axis * 0.05] {
-            for off in [-0.048, 0.048, -0.008, 0.008] {
-                corners.push(project(&scene, &view, &open, end + y_axis * off));
-            }
-        }
-        let depth = corners.iter().map(|c| c.2).fold(f64::INFINITY, f64::min);
-        let pad = view.f_px * 0.01 / depth + 1.5;
-        let (x0, x1) = corners.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
-            (lo.min(c.0 - pad), hi.max(c.0 + pad))
-        });
-        let (y0, y1) = corners.iter().fold((f64::MAX, f64::MIN), |(lo, hi), c| {
-            (lo.min(c.1 - pad), hi.max(c.1 + pad))
-        });
-        for (x, y) in changed {
-            assert!(
-                (x0..=x1).contains(&x) && (y0..=y1).contains(&y),
-                "pixel ({x}, {y}) changed outside the gripper's box x {x0}..{x1}, y {y0}..{y1}"
-            );
-        }
-    }
-
-    #[test]
-    fn the_wrist_camera_moves_with_the_arm_and_the_front_camera_does_not() {
-        let rig = rig();
-        let scene = Scene::new(&rig, 1);
-        let front = View::for_camera(&scene, &rig.cameras[0], 0);
-        let wrist = View::for_camera(&scene, &rig.cameras[1], 1);
-        assert!(matches!(wrist.mount, Mount::Wrist { arm: 0, .. }));
-        // Rest, then the arm lowered to the pick (the cube not yet lifted).
-        let (a, b) = (
-            scene.state_at(0.0),
-            scene.state_at(0.25 * super::super::scene::CYCLE_S),
-        );
-        assert_ne!(a.arms[0].q, b.arms[0].q);
-        assert_eq!(a.arms[0].cube_world, b.arms[0].cube_world);
-        assert_eq!(
-            front.world_from_camera(&scene, &a),
-            front.world_from_camera(&scene, &b)
-        );
-        assert_ne!(
-            wrist.world_from_camera(&scene, &a),
-            wrist.world_from_camera(&scene, &b)
-        );
-        let n = (wrist.width * wrist.height) as f64;
-        let moved = changed(&wrist, &draw(&scene, &wrist, &a), &draw(&scene, &wrist, &b));
-        assert!(
-            moved.len() as f64 > 0.2 * n,
-            "{} of {n} changed",
-            moved.len()
-        );
-        // Above the pick, the wrist camera looks down at the cube.
-        let p = project(&scene, &wrist, &b, b.arms[0].cube_world);
-        assert!(
-            inside(&wrist, (p.0, p.1)),
-            "cube out of the wrist view: {p:?}"
-        );
-    }
-
-    #[test]
-    fn every_encoding_holds_the_same_picture() {
-        let rig = rig();
-        let scene = Scene::new(&rig, 2);
-        let view = View::for_camera(&scene, &rig.cameras[0], 0);
-        let state = scene.state_at(1.3);
-        let table_z = table_height(&scene);
-        let encode = |encoding: &str| {
-            let mut out = Vec::new();
-            render(&scene, &view, &state, encoding, table_z, &mut out);
-            out
-        };
-        let rgb = encode("rgb8");
-        for (encoding, channels) in [("bgr8", 3), ("rgba8", 4), ("bgra8", 4), ("mono8", 1)] {
-            let img = encode(encoding);
-            assert_eq!(img.len(), view.width * view.height * channels, "{encoding}");
-            for (px, src) in img.chunks(channels).zip(rgb.chunks(3)) {
-                let (r, g, b) = (src[0], src[1], src[2]);
-                let want: Vec<u8> = match encoding {
-                    "bgr8" => vec![b, g, r],
-                    "rgba8" => vec![r, g, b, 255],
-                    "bgra8" => vec![b, g, r, 255],
-                    _ => vec![
-                        ((u16::from(r) * 77 + u16::from(g) * 150 + u16::from(b) * 29) >> 8) as u8,
-                    ],
-                };
-                assert_eq!(px, want, "{encoding}");
-            }
-        }
-    }
-}
+mod tests;

@@ -1,0 +1,223 @@
+//! The live publishing threads: one per camera, arm and gripper topic, each at the rig's rate.
+//!
+//! `header.stamp` is the capture time on the rate's grid from the origin plus seeded jitter; the
+//! message is built from the world as it is at that instant and leaves a realistic latency
+//! later (cameras tens of ms, arms well under one ms), also seeded. A stream whose capture
+//! time is already past (an origin in the past) runs flat out.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Duration;
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use scaledp_recorder::keys::RmwAttachment;
+use scaledp_recorder::now_ns;
+use scaledp_schema::rig::{Arm, Camera, CameraModel};
+use scaledp_schema::RosMessage;
+use zenoh::Wait;
+
+use crate::headless::OfflineRun;
+use crate::messages;
+use crate::render::{self, View};
+use crate::runtime::{PublishHook, Shared};
+
+/// What a stream publishes.
+// One value per stream thread: the size difference between variants costs nothing.
+#[allow(clippy::large_enum_variant)]
+pub(crate) enum Kind {
+    Camera {
+        view: View,
+        cam: Camera,
+        cache: Vec<Vec<u8>>,
+    },
+    Arm {
+        index: usize,
+        arm: Arm,
+    },
+    Gripper {
+        index: usize,
+        arm: Arm,
+    },
+}
+
+pub(crate) struct Stream {
+    pub topic: String,
+    pub message_type: &'static str,
+    pub rate_hz: f64,
+    /// Base latency and the width of its uniform jitter (ms).
+    pub latency_ms: (f64, f64),
+    /// Half-width of the uniform jitter of capture times (ms).
+    pub stamp_jitter_ms: f64,
+    pub kind: Kind,
+}
+
+pub(crate) struct StreamCtx {
+    pub shared: Arc<Shared>,
+    pub hook: Option<PublishHook>,
+    pub rng: ChaCha8Rng,
+    pub t0: u64,
+    pub rmw: Option<Vec<u8>>,
+}
+
+/// The rig's streams, cameras first, in `Rig::topics` order (command topics excluded).
+pub(crate) fn streams(shared: &Shared, frame_cache: usize, seed: u64) -> Vec<Stream> {
+    let scene = shared.scene.clone();
+    let rig = &shared.rig;
+    let mut out = Vec::new();
+    for (i, cam) in rig.cameras.iter().enumerate() {
+        let view = View::for_camera(&scene, cam, i);
+        // A cache renders the operator's episode at the camera's rate, offline.
+        let mut cache = Vec::with_capacity(frame_cache);
+        if frame_cache > 0 {
+            let mut run = OfflineRun::new(scene.clone(), seed);
+            for k in 0..frame_cache {
+                run.advance_to((k as f64 * 1e9 / cam.fps) as u64, &mut |_, _| {});
+                let mut buf = Vec::new();
+                render::render(
+                    &scene,
+                    &view,
+                    &run.world().state(),
+                    cam.encoding(),
+                    &mut buf,
+                );
+                cache.push(buf);
+            }
+        }
+        let latency_ms = if cam.model == CameraModel::Zed {
+            30.0
+        } else {
+            15.0
+        };
+        out.push(Stream {
+            topic: cam.topic.clone(),
+            message_type: cam.message_type(),
+            rate_hz: cam.fps,
+            latency_ms: (latency_ms, 8.0),
+            stamp_jitter_ms: 0.5,
+            kind: Kind::Camera {
+                view,
+                cam: cam.clone(),
+                cache,
+            },
+        });
+    }
+    for (i, arm) in rig.arms.iter().enumerate() {
+        out.push(Stream {
+            topic: arm.joint_state_topic.clone(),
+            message_type: "sensor_msgs/msg/JointState",
+            rate_hz: arm.rate_hz,
+            latency_ms: (0.3, 0.4),
+            stamp_jitter_ms: 0.02,
+            kind: Kind::Arm {
+                index: i,
+                arm: arm.clone(),
+            },
+        });
+        if let Some(g) = &arm.gripper {
+            out.push(Stream {
+                topic: g.topic.clone(),
+                message_type: "sensor_msgs/msg/JointState",
+                rate_hz: g.rate_hz,
+                latency_ms: (2.0, 2.0),
+                stamp_jitter_ms: 0.5,
+                kind: Kind::Gripper {
+                    index: i,
+                    arm: arm.clone(),
+                },
+            });
+        }
+    }
+    out
+}
+
+fn sleep_until(ns: u64) {
+    let now = now_ns();
+    if ns > now {
+        std::thread::sleep(Duration::from_nanos(ns - now));
+    }
+}
+
+impl Stream {
+    /// Publishes until the simulation stops; returns (topic, messages published).
+    pub(crate) fn run(
+        self,
+        mut ctx: StreamCtx,
+        publisher: zenoh::pubsub::Publisher<'static>,
+    ) -> (String, u64) {
+        let period_ns = 1e9 / self.rate_hz;
+        let mut image_buf = Vec::new();
+        let mut k: u64 = 0;
+        while !ctx.shared.stop.load(Ordering::Relaxed) {
+            let jitter = ctx.rng.random_range(-1.0..=1.0) * self.stamp_jitter_ms * 1e6;
+            let latency =
+                (self.latency_ms.0 + ctx.rng.random_range(0.0..=1.0) * self.latency_ms.1) * 1e6;
+            let capture_ns = ctx.t0 + (k as f64 * period_ns + jitter).max(0.0) as u64;
+            // The world as it is at the capture instant.
+            sleep_until(capture_ns);
+            if ctx.shared.stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let payload = self.message(&ctx.shared, k, capture_ns, &mut image_buf);
+            sleep_until(capture_ns + latency as u64);
+            if ctx.shared.stop.load(Ordering::Relaxed) {
+                break;
+            }
+            if let Some(hook) = &ctx.hook {
+                hook(&self.topic, &payload);
+            }
+            let put = publisher.put(payload);
+            let put = match &ctx.rmw {
+                Some(gid) => put.attachment(
+                    RmwAttachment {
+                        sequence_number: k as i64 + 1,
+                        source_timestamp_ns: now_ns() as i64,
+                        source_gid: gid.clone(),
+                    }
+                    .to_zbytes(),
+                ),
+                None => put,
+            };
+            if let Err(e) = put.wait() {
+                tracing::warn!("{}: {e}", self.topic);
+            }
+            k += 1;
+        }
+        (self.topic, k)
+    }
+
+    fn message(
+        &self,
+        shared: &Shared,
+        k: u64,
+        capture_ns: u64,
+        image_buf: &mut Vec<u8>,
+    ) -> Vec<u8> {
+        match &self.kind {
+            Kind::Camera { view, cam, cache } => {
+                if cache.is_empty() {
+                    let state = shared.state();
+                    render::render(&shared.scene, view, &state, cam.encoding(), image_buf);
+                } else {
+                    image_buf.clear();
+                    image_buf.extend_from_slice(&cache[k as usize % cache.len()]);
+                }
+                let image = messages::image(cam, std::mem::take(image_buf), capture_ns);
+                let out = image.to_cdr();
+                *image_buf = image.data; // reuse the pixel buffer for the next frame
+                out
+            }
+            Kind::Arm { index, arm } => {
+                let s = shared.arm_state(*index);
+                messages::joint_state(arm, &s, capture_ns).to_cdr()
+            }
+            Kind::Gripper { index, arm } => {
+                let width = shared.arm_state(*index).gripper_width_m;
+                match &arm.gripper {
+                    Some(g) => messages::gripper_state(g, width, capture_ns).to_cdr(),
+                    None => Vec::new(),
+                }
+            }
+        }
+    }
+}
