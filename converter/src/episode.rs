@@ -484,12 +484,35 @@ pub fn convert(
     }
     // The action is the next tick's state: the last tick has none and is dropped. An arm with a
     // command topic takes its pose from the latest command at the tick instead (its gripper
-    // still from the next tick).
+    // from its gripper's command topic, if any, else still from the next tick).
     let frames = n_ticks - 1;
     let state: Vec<f32> = state_ticks[..frames].concat();
     let mut action: Vec<f32> = state_ticks[1..].concat();
     let dim = 7 * rig.arms.len();
     for (a, (arm, (k, tcp))) in rig.arms.iter().zip(&kin).enumerate() {
+        // --- gripper command (scaledp-sim, issue 10): a gripper's `command_topic` (a leader
+        // gripper's JointState, its joints mapped by name) gives the action's gripper opening:
+        // the latest command at each tick.
+        if let Some((g, topic)) = arm
+            .gripper
+            .as_ref()
+            .and_then(|g| Some((g, g.command_topic.as_ref()?)))
+        {
+            let msgs = by_topic(topic);
+            let rate = rig.control_rate_hz;
+            let cmd = joint_series(path, &msgs, topic, &g.joint_names, rate, opts)?;
+            if cmd.positions.is_empty() {
+                return Err(reject(format!(
+                    "gripper command topic {topic} of arm '{}' has no messages",
+                    arm.name
+                )));
+            }
+            for (t, tick) in aligned.ticks_ns[..frames].iter().enumerate() {
+                let i = cmd.stream.latest_at(*tick).unwrap_or(0);
+                action[t * dim + a * 7 + 6] = g.model.width_m(&cmd.positions[i]) as f32;
+            }
+        }
+        // --- end gripper command
         let Some(topic) = &arm.command_topic else {
             continue;
         };
