@@ -52,8 +52,12 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Run a simulated rig that publishes cameras and joint states over Zenoh like a real one.
+    /// Run a simulated rig that publishes cameras and joint states over Zenoh like a real one
+    /// and follows commands (a Cartesian TCP target and a gripper opening per arm).
     Sim(SimArgs),
+    /// Collect demonstrations in one process: the simulated task, its scripted teleoperator and
+    /// the recorder, one episode per seed, each labelled by the task's scorer.
+    Collect(CollectArgs),
     /// Record teleop episodes from Zenoh into one MCAP file each.
     Record(RecordArgs),
     /// Repair an MCAP file cut short by a crash, keeping every complete chunk.
@@ -98,13 +102,24 @@ pub enum KeysArg {
     Rmw,
 }
 
+/// Who drives the simulated arms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OperatorArg {
+    /// Nobody in-process: the arms hold still until commands arrive over Zenoh.
+    None,
+    /// The scripted expert, as a teleoperator publishing leader commands.
+    Scripted,
+}
+
 /// `scaledp sim`.
 #[derive(Debug, Args)]
 pub struct SimArgs {
-    /// Rig file, or the name of a shipped rig (franka_2zed, bimanual_ur5_3rs).
+    /// Rig file, or the name of a shipped rig (franka_2zed, bimanual_ur5_3rs, or their
+    /// simulated task cells with command topics, franka_sim, bimanual_ur5_sim).
     #[arg(long, default_value = "franka_2zed")]
     pub rig: String,
-    /// Seed of the trajectories, jitter and latencies.
+    /// Seed of the first episode (cubes, targets, the operator's hands) and of the jitter and
+    /// latencies; episode i uses seed + i.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Stop after this many seconds (default: until Ctrl-C).
@@ -116,7 +131,63 @@ pub struct SimArgs {
     /// Bridge namespace prefix for the keys.
     #[arg(long, default_value = "")]
     pub namespace: String,
+    /// Drive the arms with the scripted teleoperator. Alone it demonstrates episode after
+    /// episode; with --episodes it runs that many and drives a recorder's control key around
+    /// each (start, then success or failure as the task's scorer says).
+    #[arg(long, value_enum, default_value = "none")]
+    pub operator: OperatorArg,
+    /// With --operator scripted: this many episodes (seeds seed, seed + 1, …), then exit.
+    #[arg(long)]
+    pub episodes: Option<u64>,
+    /// With --operator scripted: score the operator over --episodes seeds (default 100) in
+    /// simulated time, without cameras or network, and print its success rate.
+    #[arg(long)]
+    pub score: bool,
+    /// Longest episode (s): an operator not done by then fails it.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_seconds: f64,
+    /// Prefix of the recorder's control and status keys the episodes drive.
+    #[arg(long, default_value = "scaledp/recorder")]
+    pub control_prefix: String,
+    /// Seconds to wait for a recorder on the control key before the first episode.
+    #[arg(long, default_value_t = 30.0)]
+    pub wait_recorder: f64,
+    /// Prefix of the simulator's own keys (<prefix>/reset in, <prefix>/task out).
+    #[arg(long, default_value = "scaledp/sim")]
+    pub sim_prefix: String,
     /// Network settings; by default the sim listens on tcp/127.0.0.1:7447 like the bridge.
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+/// `scaledp collect`.
+#[derive(Debug, Args)]
+pub struct CollectArgs {
+    /// Rig file, or the name of a shipped rig (franka_sim and bimanual_ur5_sim carry command
+    /// topics, so the commands are recorded too).
+    #[arg(long, default_value = "franka_sim")]
+    pub rig: String,
+    /// Episodes to collect.
+    #[arg(long, default_value_t = 100)]
+    pub episodes: u64,
+    /// Directory for episode_NNNNNN.mcap files (numbering continues after existing ones) and
+    /// collect.jsonl (seed and outcome of each episode).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of the first episode; episode i uses seed + i.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// The task instruction stored with each episode (default: the cube task in words).
+    #[arg(long)]
+    pub task: Option<String>,
+    /// Longest episode (s): an operator not done by then fails it.
+    #[arg(long, default_value_t = 30.0)]
+    pub max_seconds: f64,
+    /// Chunk compression.
+    #[arg(long, value_enum, default_value = "lz4")]
+    pub compression: CompressionArg,
+    /// Network settings of the in-process session (by default it only listens on a free
+    /// loopback port, so nothing else sees it; --listen lets a viewer or serve look in).
     #[command(flatten)]
     pub net: NetArgs,
 }

@@ -16,8 +16,8 @@ use scaledp_schema::Rig;
 
 use super::record::{timed_episodes, wait_for_topics};
 use crate::cli::{DemoArgs, ExitStatus};
-use scaledp_sim::SimOptions;
 use crate::ui::topic_labels;
+use scaledp_sim::SimOptions;
 
 pub fn run(args: DemoArgs) -> Result<ExitStatus> {
     let rig = Rig::load_or_builtin(&args.rig)?;
@@ -31,12 +31,15 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
         &[],
         std::slice::from_ref(&endpoint),
     )?)?;
+    // The scripted teleoperator demonstrates the cube task, episode after episode.
     let sim = SimOptions::new(rig.clone())
         .seed(args.seed)
+        .scripted_operator(true)
+        .autoplay(true)
         .spawn(&sim_session)?;
     let out = args.out.join("recordings");
     let recorder = RecorderOptions::new(rig.clone(), &out)
-        .task("pick up the red cube and put it down to the side")
+        .task("put the red cube on the green square")
         .operator("scaledp demo")
         .start(net::zenoh_config(None, &[endpoint], &[])?)?;
     let stop = super::interrupt_flag();

@@ -1,5 +1,6 @@
 //! One module per subcommand; `dispatch` picks it.
 
+mod collect;
 mod convert;
 mod demo;
 pub(crate) mod predict;
@@ -16,6 +17,7 @@ use crate::cli::{Command, CompressionArg, ExitStatus, NetArgs};
 pub fn dispatch(command: Command) -> Result<ExitStatus> {
     match command {
         Command::Sim(args) => sim::run(args),
+        Command::Collect(args) => collect::run(args),
         Command::Record(args) => record::run(args),
         Command::Recover(args) => recover::run(args),
         Command::Convert(args) => convert::run(args),
