@@ -31,21 +31,8 @@ pub enum Error {
     #[error("{0}")]
     Config(String),
     /// A checkpoint does not fit the dataset or observation it is used with.
-    #[error(
-        "{what} mismatch: the checkpoint {checkpoint} has {expected}, the {other} has {found}"
-    )]
-    Mismatch {
-        /// What differs (`cameras`, `state dimension`, ...).
-        what: String,
-        /// The checkpoint directory.
-        checkpoint: String,
-        /// What the checkpoint expects.
-        expected: String,
-        /// Where the other value comes from (`dataset datasets/cups`, `observation`).
-        other: String,
-        /// What it has.
-        found: String,
-    },
+    #[error(transparent)]
+    Mismatch(Box<Mismatch>),
     /// An observation passed to [`crate::Policy::predict`] has the wrong size.
     #[error("observation: {0}")]
     Observation(String),
@@ -73,6 +60,22 @@ pub enum Error {
         /// The last completed step.
         step: u64,
     },
+}
+
+/// What differs between a checkpoint and the data it is used with.
+#[derive(Debug, thiserror::Error)]
+#[error("{what} mismatch: the checkpoint {checkpoint} has {expected}, the {other} has {found}")]
+pub struct Mismatch {
+    /// What differs (`cameras`, `state dimension`, ...).
+    pub what: String,
+    /// The checkpoint directory.
+    pub checkpoint: String,
+    /// What the checkpoint expects.
+    pub expected: String,
+    /// Where the other value comes from (`dataset datasets/cups`).
+    pub other: String,
+    /// What it has.
+    pub found: String,
 }
 
 /// `Result` with this crate's [`Error`].

@@ -90,7 +90,7 @@ pub use checkpoint::{
     resolve as resolve_checkpoint, CheckpointConfig, Normalization, NormalizerConfig,
 };
 pub use config::{DiffusionConfig, ModelConfig, ModelSize};
-pub use error::{Error, Result};
+pub use error::{Error, Mismatch, Result};
 pub use inference::{ddim_sample, ActionChunk, Observation, Policy};
 pub use predict::{predict_episode, EpisodePrediction};
 pub use scheduler::NoiseScheduler;

@@ -180,11 +180,11 @@ pub fn predict_episode(
 }
 
 fn mismatch(what: &str, ckpt: &str, expected: &[String], dataset: &str, found: &[String]) -> Error {
-    Error::Mismatch {
+    Error::Mismatch(Box::new(crate::error::Mismatch {
         what: what.into(),
         checkpoint: ckpt.into(),
         expected: format!("{} {expected:?}", expected.len()),
         other: format!("dataset {dataset}"),
         found: format!("{} {found:?}", found.len()),
-    }
+    }))
 }

@@ -1,6 +1,7 @@
 //! The Rust encoders and denoiser against an independent numpy forward pass
 //! (`tests/py/scaledp_reference.py`) reading the same `model.safetensors`, on random non-zero
 //! weights. Needs `.venv` (`bash scripts/setup-python.sh`): without it the test fails.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
 use std::path::PathBuf;
 use std::process::Command;

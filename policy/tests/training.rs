@@ -1,5 +1,6 @@
 //! Training runs on tiny datasets: exact resume, checkpoint round trips, overfitting one
 //! episode, and the errors bad inputs give.
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
 mod common;
 

@@ -42,7 +42,7 @@ pub struct Param {
 }
 
 enum Source {
-    Fresh(ChaCha8Rng),
+    Fresh(Box<ChaCha8Rng>),
     Load {
         tensors: HashMap<String, Tensor>,
         file: String,
@@ -79,7 +79,10 @@ impl Builder {
 
     /// Fresh weights from a seeded generator (the same seed gives the same weights anywhere).
     pub fn fresh(seed: u64, device: &Device) -> Self {
-        Self::with(Source::Fresh(ChaCha8Rng::seed_from_u64(seed)), device)
+        Self::with(
+            Source::Fresh(Box::new(ChaCha8Rng::seed_from_u64(seed))),
+            device,
+        )
     }
 
     /// Weights taken from `tensors` (read from `file`), each checked for its shape.

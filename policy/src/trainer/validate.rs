@@ -88,12 +88,12 @@ pub(super) fn run(
             }
             loss_sum += f64::from(err[k]);
             valid_total += 1;
-            for d in 0..a {
+            for (d, acc) in ae_raw.iter_mut().enumerate() {
                 let i = k * a + d;
                 let e = f64::from(pred[i] - batch.action[i]);
                 se += e * e;
                 ae += e.abs();
-                ae_raw[d] += f64::from(pred_raw[i] - rec_raw[i]).abs();
+                *acc += f64::from(pred_raw[i] - rec_raw[i]).abs();
             }
         }
         samples += b;
