@@ -1,7 +1,7 @@
 //! Training throughput and DDIM latency on this machine (what `scaledp bench train` reports):
 //!
 //! ```sh
-//! cargo run --release -p scaledp-policy --example bench_train -- DATASET [WxH] [batch] [steps] [micro]
+//! cargo run --release -p scaledp-policy --example bench_train -- DATASET [WxH] [batch] [steps] [micro|-] [cam,cam]
 //! ```
 use candle_core::Device;
 use scaledp_policy::bench::{ddim_latency, train_throughput};
@@ -20,6 +20,9 @@ fn main() -> scaledp_policy::Result<()> {
     let batch: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(64);
     let steps: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(3);
     let micro: Option<usize> = args.get(5).and_then(|s| s.parse().ok());
+    let cams: Option<Vec<String>> = args
+        .get(6)
+        .map(|s| s.split(',').map(String::from).collect());
     let dev = Device::Cpu;
     let mut opts = TrainOptions::default()
         .model(ModelSize::Ti)
@@ -31,8 +34,11 @@ fn main() -> scaledp_policy::Result<()> {
     if let Some(m) = micro {
         opts = opts.micro_batch(m);
     }
+    if let Some(c) = &cams {
+        opts = opts.cameras(c.clone());
+    }
     let t = train_throughput(&dataset, opts, 1, steps, &dev)?;
-    println!("train {dataset} {size:?} batch {batch}: {:.2} s/step, {:.1} samples/s, data wait {:.1} %, params {:?}",
+    println!("train {dataset} {size:?} cameras {cams:?} batch {batch}: {:.2} s/step, {:.1} samples/s, data wait {:.1} %, params {:?}",
         t.step_s, t.samples_per_s, 100.0 * t.data_wait_share, t.params);
     for s in [ModelSize::Ti, ModelSize::S] {
         let cams = vec![
