@@ -12,6 +12,7 @@
 mod batch;
 mod decode;
 mod error;
+mod files;
 mod loader;
 mod meta;
 mod normalize;
@@ -23,6 +24,7 @@ mod stream;
 
 pub use batch::Batch;
 pub use error::{Error, Result};
+pub use files::DatasetFiles;
 pub use loader::{DatasetInfo, ImagePool, Loader, LoaderState};
 pub use normalize::{Affine, Norm, Normalizer};
 pub use options::LoaderOptions;
