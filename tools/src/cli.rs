@@ -77,6 +77,8 @@ pub enum Command {
     /// The whole path on a simulated rig: records a few short episodes over loopback, converts
     /// them into a LeRobot dataset and runs one epoch of the training-data loader.
     Demo(DemoArgs),
+    /// Show recordings, bags and LeRobot datasets in the rerun viewer (or write an .rrd file).
+    View(ViewArgs),
 }
 
 /// Where the Zenoh session connects and listens.
@@ -245,6 +247,10 @@ pub struct RecordArgs {
     /// Never read the keyboard, even on a terminal (control over Zenoh only).
     #[arg(long)]
     pub no_keyboard: bool,
+    /// Stream what is recorded (downsampled images, joints, rates and drops) to a rerun viewer:
+    /// a new one, or the one at URL (e.g. rerun+http://host:9876/proxy).
+    #[arg(long, value_name = "URL", num_args = 0..=1)]
+    pub view: Option<Option<String>>,
     /// Network settings; by default a peer connecting to tcp/127.0.0.1:7447.
     #[command(flatten)]
     pub net: NetArgs,
@@ -389,4 +395,36 @@ pub struct DemoArgs {
     /// Samples per batch of the loader epoch at the end.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..))]
     pub batch_size: u64,
+}
+
+/// `scaledp view`.
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// Recordings (.mcap, also a .partial one), ROS 1 .bag files, rosbag2 directories or .db3
+    /// files, directories of them, or LeRobot v3.0 datasets (a directory or s3://bucket/prefix).
+    #[arg(required = true, value_name = "PATH")]
+    pub paths: Vec<String>,
+    /// Only this episode: a dataset's episode_index, or the N-th input of a directory
+    /// (repeatable; default: every episode).
+    #[arg(long, value_name = "N")]
+    pub episode: Vec<u64>,
+    /// Write an .rrd file instead of showing a viewer.
+    #[arg(long, value_name = "OUT.rrd", conflicts_with = "connect")]
+    pub save: Option<PathBuf>,
+    /// Stream to a rerun viewer already running, e.g. rerun+http://host:9876/proxy.
+    #[arg(long, value_name = "URL")]
+    pub connect: Option<String>,
+    /// Downsample images wider than this (pixels).
+    #[arg(long, value_name = "PX")]
+    pub max_width: Option<u32>,
+    /// Rig file or shipped rig name mapping topics (default: the rig stored in the input, else
+    /// detected).
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// Actions drawn ahead of each frame as the action chunk.
+    #[arg(long, default_value_t = 16)]
+    pub chunk: usize,
+    /// A policy checkpoint whose predicted chunks are drawn beside the dataset's.
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint: Option<PathBuf>,
 }

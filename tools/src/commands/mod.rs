@@ -8,6 +8,7 @@ mod record;
 mod recover;
 mod sim;
 pub(crate) mod train;
+mod view;
 
 use anyhow::Result;
 
@@ -30,6 +31,7 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
         Command::Train(args) => train::run(args),
         Command::Predict(args) => predict::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::View(args) => view::run(args),
     }
 }
 

@@ -54,7 +54,9 @@ fn print_finished(r: &EpisodeReport, eol: &str) {
 /// Handles pending events; returns true when an episode finished or failed.
 fn drain(recorder: &Recorder, tally: &mut Tally, eol: &str) -> bool {
     let mut ended = false;
+    super::view::live::update(recorder, None);
     while let Ok(ev) = recorder.events().try_recv() {
+        super::view::live::update(recorder, Some(&ev));
         match ev {
             Event::Started { index, path } => {
                 tracing::debug!(index, path = %path.display(), "started")
@@ -145,7 +147,7 @@ pub fn run(args: RecordArgs) -> Result<ExitStatus> {
         .clone()
         .or_else(|| std::env::var("USER").ok())
         .unwrap_or_default();
-    let recorder = RecorderOptions::new(rig, &args.out)
+    let recorder = RecorderOptions::new(rig.clone(), &args.out)
         .task(&args.task)
         .operator(operator)
         .compression(super::compression(args.compression))
@@ -154,6 +156,9 @@ pub fn run(args: RecordArgs) -> Result<ExitStatus> {
         .control_prefix(&args.control_prefix)
         .bridge_namespace(&args.namespace)
         .start(config)?;
+    if let Some(url) = &args.view {
+        super::view::live::start(&recorder, &rig, &args.namespace, url.as_deref())?;
+    }
     let stop = super::interrupt_flag();
     let tally = if let Some(duration) = args.duration {
         wait_for_topics(&recorder, args.wait_topics, &stop);
@@ -174,6 +179,9 @@ pub fn run(args: RecordArgs) -> Result<ExitStatus> {
         );
         controlled(&recorder, args.episodes, &stop, labels)
     };
+    if let Err(e) = super::view::live::finish() {
+        tracing::warn!("live view: {e:#}");
+    }
     recorder.finish()?;
     let lost = tally.lost();
     eprintln!(

@@ -1,0 +1,182 @@
+//! `scaledp view PATH…`: recordings, bags and datasets in the rerun viewer (or an `.rrd` file);
+//! and the live view of `scaledp record --view`.
+
+use anyhow::Result;
+
+use crate::cli::{ExitStatus, ViewArgs};
+
+#[cfg(feature = "view")]
+pub fn run(args: ViewArgs) -> Result<ExitStatus> {
+    use scaledp_viewer::{Target, ViewOptions};
+    if args.checkpoint.is_some() {
+        anyhow::bail!(
+            "--checkpoint: predicted chunks need the policy's inference, which scaledp-policy does not have yet"
+        );
+    }
+    let target = match (&args.save, &args.connect) {
+        (Some(out), _) => Target::Save(out.clone()),
+        (None, Some(url)) => Target::Connect(url.clone()),
+        (None, None) => Target::Spawn,
+    };
+    let rig = args
+        .rig
+        .as_deref()
+        .map(scaledp_schema::Rig::load_or_builtin)
+        .transpose()?;
+    let opts = ViewOptions::new()
+        .max_width(args.max_width)
+        .episodes(args.episode.clone())
+        .rig(rig)
+        .chunk(args.chunk);
+    let summary = scaledp_viewer::view(&args.paths, opts, &target)?;
+    for s in &summary.shown {
+        let images: u64 = s.images.values().sum();
+        println!(
+            "{}\t{} frames\t{images} images\t{} cameras",
+            s.name,
+            s.frames,
+            s.images.len()
+        );
+        for w in &s.warnings {
+            eprintln!("{}: {w}", s.name);
+        }
+    }
+    match (&summary.saved, &target) {
+        (Some(out), _) => eprintln!(
+            "wrote {} (open it with `rerun {}`)",
+            out.display(),
+            out.display()
+        ),
+        (None, Target::Connect(url)) => eprintln!("sent to the rerun viewer at {url}"),
+        _ => eprintln!("sent to the rerun viewer"),
+    }
+    Ok(ExitStatus::Success)
+}
+
+#[cfg(not(feature = "view"))]
+pub fn run(_args: ViewArgs) -> Result<ExitStatus> {
+    anyhow::bail!("this scaledp was built without the `view` feature (rerun)")
+}
+
+/// `record --view`: a tap on the recorder's Zenoh session feeding a live rerun recording.
+#[cfg(feature = "view")]
+pub mod live {
+    use std::sync::{Arc, Mutex, OnceLock};
+    use std::time::{Duration, Instant};
+
+    use anyhow::Result;
+    use scaledp_recorder::keys::{bridge_key, rmw_key_expr};
+    use scaledp_recorder::{Event, Recorder};
+    use scaledp_schema::Rig;
+    use scaledp_viewer::{LiveOptions, RecordView, Target, TopicFigures};
+    use zenoh::sample::Sample;
+    use zenoh::Wait;
+
+    struct Tap {
+        view: Arc<RecordView>,
+        subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+        last_status: Instant,
+    }
+
+    static TAP: OnceLock<Mutex<Option<Tap>>> = OnceLock::new();
+
+    /// Starts the live view: `url` None spawns a viewer, else streams to it.
+    pub fn start(recorder: &Recorder, rig: &Rig, namespace: &str, url: Option<&str>) -> Result<()> {
+        let target = url.map_or(Target::Spawn, |u| Target::Connect(u.to_string()));
+        let view = Arc::new(RecordView::start(&target, rig, LiveOptions::default())?);
+        let mut subscribers = Vec::new();
+        for (i, t) in view.topics().iter().enumerate() {
+            for key in [
+                bridge_key(namespace, &t.topic),
+                rmw_key_expr(&t.topic, t.message_type),
+            ] {
+                let v = view.clone();
+                let sub = recorder
+                    .session()
+                    .declare_subscriber(key)
+                    .callback(move |s: Sample| v.message(i, &s.payload().to_bytes()))
+                    .wait()
+                    .map_err(|e| anyhow::anyhow!("live view subscriber: {e}"))?;
+                subscribers.push(sub);
+            }
+        }
+        let tap = Tap {
+            view,
+            subscribers,
+            last_status: Instant::now(),
+        };
+        *TAP.get_or_init(|| Mutex::new(None))
+            .lock()
+            .map_err(|_| anyhow::anyhow!("live view lock"))? = Some(tap);
+        Ok(())
+    }
+
+    /// The recorder's figures (at most 4 times a second) and an episode event, if any.
+    pub fn update(recorder: &Recorder, event: Option<&Event>) {
+        let Some(Ok(mut guard)) = TAP.get().map(Mutex::lock) else {
+            return;
+        };
+        let Some(tap) = guard.as_mut() else { return };
+        if let Some(e) = event {
+            tap.view.event(match e {
+                Event::Started { index, path } => {
+                    format!("episode {index} started: {}", path.display())
+                }
+                Event::Finished(r) => format!(
+                    "episode {} finished: {}, {:.1} s",
+                    r.index, r.outcome, r.duration_s
+                ),
+                Event::Failed { index, error } => format!("episode {index} failed: {error}"),
+            });
+        }
+        if tap.last_status.elapsed() >= Duration::from_millis(250) {
+            tap.last_status = Instant::now();
+            let s = recorder.status();
+            let topics = s
+                .topics
+                .iter()
+                .map(|t| TopicFigures {
+                    topic: t.topic.clone(),
+                    received: t.received,
+                    bytes: t.bytes,
+                    dropped: t.dropped,
+                    upstream_gaps: t.upstream_gaps,
+                })
+                .collect();
+            tap.view.status(topics, s.queued_bytes);
+        }
+    }
+
+    /// Stops the tap (before the recorder closes its session) and flushes the view.
+    pub fn finish() -> Result<()> {
+        let Some(tap) = TAP.get().and_then(|m| m.lock().ok()?.take()) else {
+            return Ok(());
+        };
+        for s in tap.subscribers {
+            let _ = s.undeclare().wait();
+        }
+        if let Ok(view) = Arc::try_unwrap(tap.view) {
+            view.finish()?;
+        }
+        Ok(())
+    }
+}
+
+/// Without the `view` feature `record --view` is refused.
+#[cfg(not(feature = "view"))]
+pub mod live {
+    use anyhow::Result;
+    use scaledp_recorder::{Event, Recorder};
+    use scaledp_schema::Rig;
+
+    /// Refuses: built without rerun.
+    pub fn start(_: &Recorder, _: &Rig, _: &str, _: Option<&str>) -> Result<()> {
+        anyhow::bail!("--view: this scaledp was built without the `view` feature (rerun)")
+    }
+    /// Nothing to update.
+    pub fn update(_: &Recorder, _: Option<&Event>) {}
+    /// Nothing to finish.
+    pub fn finish() -> Result<()> {
+        Ok(())
+    }
+}
