@@ -35,21 +35,78 @@ impl Stream {
 
     /// Index of the latest sample at or before `t_ns`.
     pub fn latest_at(&self, t_ns: u64) -> Option<usize> {
-        self.stamps_ns
-            .partition_point(|&s| s <= t_ns)
-            .checked_sub(1)
+        latest_at(&self.stamps_ns, t_ns)
     }
 
     /// (i, i + 1, weight of i + 1) bracketing `t_ns`, or the exact sample.
     pub fn bracket(&self, t_ns: u64) -> Option<(usize, usize, f64)> {
-        let i = self.latest_at(t_ns)?;
-        if self.stamps_ns[i] == t_ns || i + 1 >= self.stamps_ns.len() {
-            return (self.stamps_ns[i] == t_ns).then_some((i, i, 0.0));
-        }
-        let (a, b) = (self.stamps_ns[i], self.stamps_ns[i + 1]);
-        Some((i, i + 1, (t_ns - a) as f64 / (b - a).max(1) as f64))
+        bracket(&self.stamps_ns, t_ns)
+    }
+
+    /// The frame rule, see [`frame_at`].
+    pub fn frame_at(&self, t_ns: u64, stale_periods: f64) -> (usize, bool) {
+        frame_at(&self.stamps_ns, self.period_s, t_ns, stale_periods)
+    }
+
+    /// The joint rule, see [`sample_at`].
+    pub fn sample_at(&self, t_ns: u64) -> ((usize, usize, f64), bool) {
+        sample_at(&self.stamps_ns, self.period_s, t_ns)
     }
 }
+
+/// Index of the latest of `stamps_ns` (ascending) at or before `t_ns`.
+pub(crate) fn latest_at(stamps_ns: &[u64], t_ns: u64) -> Option<usize> {
+    stamps_ns.partition_point(|&s| s <= t_ns).checked_sub(1)
+}
+
+/// (i, i + 1, weight of i + 1) of `stamps_ns` bracketing `t_ns`, or the exact sample.
+pub(crate) fn bracket(stamps_ns: &[u64], t_ns: u64) -> Option<(usize, usize, f64)> {
+    let i = latest_at(stamps_ns, t_ns)?;
+    if stamps_ns[i] == t_ns || i + 1 >= stamps_ns.len() {
+        return (stamps_ns[i] == t_ns).then_some((i, i, 0.0));
+    }
+    let (a, b) = (stamps_ns[i], stamps_ns[i + 1]);
+    Some((i, i + 1, (t_ns - a) as f64 / (b - a).max(1) as f64))
+}
+
+/// The frame rule: the latest of a camera's frames (stamps ascending, nominal period
+/// `period_s`) at or before `t_ns` (the first when none is), and whether it is fresh — at or
+/// before the tick and at most `stale_periods` periods old.
+pub(crate) fn frame_at(
+    stamps_ns: &[u64],
+    period_s: f64,
+    t_ns: u64,
+    stale_periods: f64,
+) -> (usize, bool) {
+    let i = latest_at(stamps_ns, t_ns).unwrap_or(0);
+    let s = stamps_ns.get(i).copied().unwrap_or(u64::MAX);
+    let age_s = t_ns.saturating_sub(s) as f64 * 1e-9;
+    (i, s <= t_ns && age_s <= stale_periods * period_s)
+}
+
+/// The joint rule: the bracket of `t_ns` in a joint stream (stamps ascending, nominal period
+/// `period_s`; the first sample when there is no bracket), and whether interpolating across it
+/// is sound — the samples around the tick at most ten periods (and 50 ms) apart, so no motion
+/// is invented across a hole.
+pub(crate) fn sample_at(
+    stamps_ns: &[u64],
+    period_s: f64,
+    t_ns: u64,
+) -> ((usize, usize, f64), bool) {
+    let b = bracket(stamps_ns, t_ns);
+    let gap_s = b.map_or(f64::INFINITY, |(i, k, _)| {
+        (stamps_ns[k] - stamps_ns[i]) as f64 * 1e-9
+    });
+    (
+        b.unwrap_or((0, 0, 0.0)),
+        gap_s <= (MAX_GAP_PERIODS * period_s).max(MIN_MAX_GAP_S),
+    )
+}
+
+/// Joint samples further apart than this many periods are not interpolated across…
+const MAX_GAP_PERIODS: f64 = 10.0;
+/// …unless they are at most this far apart (s).
+const MIN_MAX_GAP_S: f64 = 0.05;
 
 /// Median interval between consecutive stamps (s).
 pub fn median_interval_s(stamps_ns: &[u64]) -> Option<f64> {
@@ -79,6 +136,9 @@ pub struct StreamReport {
     pub dropped: u64,
     /// Longest interval (s).
     pub max_interval_s: f64,
+    /// Messages that came after a later-stamped one and were put back in stamp order.
+    #[serde(default)]
+    pub reordered: usize,
 }
 
 /// What alignment measured for an episode.
@@ -96,6 +156,9 @@ pub struct AlignmentReport {
     pub max_frame_age_s: f64,
     /// Per stream.
     pub streams: Vec<StreamReport>,
+    /// Messages put back in stamp order, over every stream and command topic.
+    #[serde(default)]
+    pub reordered: usize,
 }
 
 /// The tick grid and, per tick, the chosen frame of every camera and the bracket of every
@@ -174,10 +237,10 @@ pub fn align(
         let mut chosen = Vec::with_capacity(cameras.len());
         let (mut lo, mut hi) = (u64::MAX, 0);
         for c in cameras {
-            let i = c.latest_at(t).unwrap_or(0);
+            let (i, fresh) = c.frame_at(t, stale_periods);
             let s = c.stamps_ns[i];
             let age = t.saturating_sub(s) as f64 * 1e-9;
-            ok &= s <= t && age <= stale_periods * c.period_s;
+            ok &= fresh;
             max_age = max_age.max(age);
             lo = lo.min(s);
             hi = hi.max(s);
@@ -188,13 +251,9 @@ pub fn align(
         }
         let mut brackets = Vec::with_capacity(joints.len());
         for j in joints {
-            let b = j.bracket(t);
-            let gap_s = b.map_or(f64::INFINITY, |(i, k, _)| {
-                (j.stamps_ns[k] - j.stamps_ns[i]) as f64 * 1e-9
-            });
-            // Interpolating across a hole of more than ten periods (and 50 ms) would invent motion.
-            ok &= gap_s <= (10.0 * j.period_s).max(0.05);
-            brackets.push(b.unwrap_or((0, 0, 0.0)));
+            let (b, sound) = j.sample_at(t);
+            ok &= sound;
+            brackets.push(b);
         }
         ticks.push(t);
         frames.push(chosen);
@@ -229,6 +288,7 @@ pub fn align(
             max_camera_skew_s: max_skew,
             max_frame_age_s: max_age,
             streams,
+            reordered: 0,
         },
     })
 }

@@ -191,13 +191,7 @@ fn input_bytes(path: &Path) -> u64 {
 
 /// The message types a conversion can use.
 fn useful_topic(t: &TopicInfo) -> bool {
-    matches!(
-        t.message_type.as_str(),
-        "sensor_msgs/msg/Image"
-            | "sensor_msgs/msg/CompressedImage"
-            | "sensor_msgs/msg/JointState"
-            | "geometry_msgs/msg/PoseStamped"
-    )
+    crate::source::is_read(&t.message_type)
 }
 
 /// Reads any supported input whole, keeping only the topics a conversion can use.
@@ -271,7 +265,7 @@ fn is_mcap_file(path: &Path) -> bool {
 /// Converts one input; for an MCAP file with `hash`, also returns its [`content_hash`], taken
 /// during the one read (no second pass over the file).
 fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option<String>) {
-    let failed = |e: Error| Outcome::Failed(e.to_string());
+    let failed = |e: Error| Outcome::Failed(one_line(&e));
     let run = |rec: &Recording, frames: &dyn FrameStore| -> Converted {
         check_outcome(path, rec, opts)?;
         let parts = windows(rec, frames, opts.split_gap_s);
@@ -315,6 +309,15 @@ fn convert_guarded(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Op
     guarded(path, || convert_one(path, opts, hash))
 }
 
+/// An error as the one line a failed input gets (libraries' messages may end in a newline or
+/// span several).
+fn one_line(e: &Error) -> String {
+    e.to_string()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 /// Runs `f`; a panic becomes a failed outcome naming `path` (and no hash).
 fn guarded(
     path: &Path,
@@ -327,7 +330,7 @@ fn guarded(
             .or_else(|| panic.downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "unknown panic".into());
         let line = Error::input(path, format!("internal error while converting: {message}"));
-        (Err(Outcome::Failed(line.to_string())), None)
+        (Err(Outcome::Failed(one_line(&line))), None)
     })
 }
 
@@ -338,7 +341,7 @@ fn check_outcome(
     opts: &JobOptions,
 ) -> std::result::Result<(), Outcome> {
     let label = crate::detect::episode_metadata(path, rec)
-        .map_err(|e| Outcome::Failed(e.to_string()))?
+        .map_err(|e| Outcome::Failed(one_line(&e)))?
         .and_then(|m| m.label);
     match label {
         Some(Label::Discarded) => {
@@ -403,7 +406,7 @@ pub fn run(
                             false => {
                                 let hash = content_hash(path);
                                 let r = match &hash {
-                                    Err(e) => Err(Outcome::Failed(e.to_string())),
+                                    Err(e) => Err(Outcome::Failed(one_line(e))),
                                     Ok(h) if fully_converted(&existing, h) => {
                                         Err(Outcome::Skipped("already in the dataset".into()))
                                     }
@@ -444,7 +447,7 @@ pub fn run(
                                     records.push(rec);
                                 }
                                 Err(e @ Error::Rejected { .. }) => {
-                                    failure = Some(e.to_string());
+                                    failure = Some(one_line(&e));
                                     break;
                                 }
                                 Err(e) => return Err(e),

@@ -248,6 +248,17 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
             "no camera or arm topics found (pass --rig to map topics)",
         ));
     }
+    // A detected rig makes visuomotor data: without a camera it would define a state-only
+    // dataset (and, sorted first in a batch, reject every input that has cameras). A rig given
+    // with --rig may have none.
+    if cameras.is_empty() {
+        return Err(Error::Rejected {
+            path: path.into(),
+            reason: "no camera: arm joint states but no Image or CompressedImage topic (pass \
+                     --rig to map cameras, or a rig without cameras for state-only data)"
+                .into(),
+        });
+    }
     let rig = Rig {
         name: "detected".into(),
         control_rate_hz,

@@ -4,19 +4,19 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use glam::DMat4;
-use scaledp_schema::kinematics::{pose6_from_transform, rotation_from_rpy, unwrap_angles};
-use scaledp_schema::rig::{Arm, Rig};
+use scaledp_schema::rig::Rig;
 
-use crate::align::{align, AlignmentReport, Stream};
-use crate::decode;
+use crate::align::{align, Alignment, AlignmentReport, Stream};
 use crate::error::{Error, Result};
 use crate::frames::FrameStore;
 use crate::images::{ChannelHistogram, EncodeSpec};
+use crate::kinematics::ArmKinematics;
+use crate::series::{stamp_of, unwrap_pose_angles, CommandPoses, JointSeries, Ordered};
 use crate::source::{RawMessage, Recording};
 
 /// How to convert. Defaults: the rig's control rate, 320×240 JPEG at quality 90, frames staler
-/// than 1.5 periods invalidate a tick, at most 5 % invalid ticks, header stamps as time.
+/// than 1.5 periods invalidate a tick, at most 5 % invalid ticks, header stamps as time,
+/// messages up to 0.1 s out of stamp order put back in order.
 #[derive(Debug, Clone)]
 pub struct ConvertOptions {
     /// Rig to map topics with (else the one stored in the recording, else detected).
@@ -42,6 +42,29 @@ pub struct ConvertOptions {
     /// (name, topic): read camera / arm `name` (or `<arm>_gripper`, `<arm>_command`) from
     /// `topic` instead of the rig's.
     pub topic_overrides: Vec<(String, String)>,
+}
+
+/// A message stamped up to this long (ns) before one stored earlier on its topic is put back in
+/// stamp order (and counted); further back is a clock jump, and the episode is refused.
+const REORDER_WINDOW_NS: u64 = 100_000_000;
+
+impl ConvertOptions {
+    /// Whether a message logged at `log_ns` is inside the window converted.
+    pub(crate) fn in_window(&self, log_ns: u64) -> bool {
+        self.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns))
+    }
+    /// The reorder window in ns.
+    pub(crate) fn reorder_window_ns(&self) -> u64 {
+        REORDER_WINDOW_NS
+    }
+    /// Output size and quality of frames.
+    pub(crate) fn encode_spec(&self) -> EncodeSpec {
+        EncodeSpec {
+            width: self.width,
+            height: self.height,
+            quality: self.jpeg_quality,
+        }
+    }
 }
 
 impl Default for ConvertOptions {
@@ -135,207 +158,9 @@ pub fn state_names(rig: &Rig) -> Vec<String> {
         .collect()
 }
 
-/// An arm's forward kinematics to its TCP.
-enum Kinematics {
-    Builtin(scaledp_schema::RobotModel),
-    Urdf(crate::urdf::UrdfChain),
-}
-
-fn kinematics(path: &Path, arm: &Arm) -> Result<(Kinematics, DMat4)> {
-    let tcp = match arm.tcp_xyz_rpy {
-        Some([x, y, z, r, p, yw]) => {
-            DMat4::from_translation(glam::DVec3::new(x, y, z))
-                * DMat4::from_mat3(rotation_from_rpy([r, p, yw]))
-        }
-        None if arm.urdf.is_some() => DMat4::IDENTITY,
-        None => arm.model.default_flange_from_tcp(),
-    };
-    let k = match &arm.urdf {
-        Some(u) => {
-            let chain = crate::urdf::UrdfChain::from_file(&u.path, &u.base_link, &u.tip_link)?;
-            if chain.joint_names() != arm.joint_names.as_slice() {
-                return Err(Error::input(
-                    path,
-                    format!(
-                        "arm '{}': URDF joints {:?} differ from the rig's {:?}",
-                        arm.name,
-                        chain.joint_names(),
-                        arm.joint_names
-                    ),
-                ));
-            }
-            Kinematics::Urdf(chain)
-        }
-        None => Kinematics::Builtin(arm.model),
-    };
-    Ok((k, tcp))
-}
-
-fn fk(k: &Kinematics, q: &[f64]) -> std::result::Result<DMat4, String> {
-    match k {
-        Kinematics::Builtin(m) => m.base_from_flange(q).map_err(|e| e.to_string()),
-        Kinematics::Urdf(c) => c.base_from_tip(q).map_err(|e| e.to_string()),
-    }
-}
-
-/// A JointState topic as stamps plus positions of `names` (mapped by name, never by index).
-struct JointSeries {
-    stream: Stream,
-    positions: Vec<Vec<f64>>,
-}
-
-fn stamp_of(m: &RawMessage, header_ns: u64, opts: &ConvertOptions) -> u64 {
-    if opts.use_log_time || header_ns == 0 {
-        m.log_time_ns
-    } else {
-        header_ns
-    }
-}
-
-fn check_monotonic(path: &Path, topic: &str, stamps: &[u64]) -> Result<()> {
-    if let Some(i) = stamps.windows(2).position(|w| w[1] < w[0]) {
-        return Err(Error::Rejected {
-            path: path.into(),
-            reason: format!(
-                "time runs backwards on {topic}: stamp {} ns after {} ns (message {})",
-                stamps[i + 1],
-                stamps[i],
-                i + 1
-            ),
-        });
-    }
-    Ok(())
-}
-
-fn joint_series(
-    path: &Path,
-    msgs: &[&RawMessage],
-    topic: &str,
-    names: &[String],
-    rate: f64,
-    opts: &ConvertOptions,
-) -> Result<JointSeries> {
-    let mut stamps = Vec::with_capacity(msgs.len());
-    let mut positions = Vec::with_capacity(msgs.len());
-    // Where each wanted joint sits in the message; re-mapped whenever the name list changes.
-    let mut seen_names: Vec<String> = Vec::new();
-    let mut index: Vec<Option<usize>> = Vec::new();
-    for m in msgs {
-        let js = decode::joint_state(path, m)?;
-        if js.name.len() != js.position.len() {
-            return Err(Error::Message {
-                path: path.into(),
-                topic: topic.into(),
-                log_time_ns: m.log_time_ns,
-                reason: format!(
-                    "{} names but {} positions",
-                    js.name.len(),
-                    js.position.len()
-                ),
-            });
-        }
-        if js.name != seen_names {
-            index = names
-                .iter()
-                .map(|n| js.name.iter().position(|x| x == n))
-                .collect();
-            seen_names = js.name.clone();
-        }
-        let mut q = Vec::with_capacity(names.len());
-        for (n, i) in names.iter().zip(&index) {
-            let i = i.ok_or_else(|| Error::Rejected {
-                path: path.into(),
-                reason: format!("joint '{n}' is missing from {topic} (it has {:?})", js.name),
-            })?;
-            let v = js.position[i];
-            if !v.is_finite() {
-                return Err(Error::Rejected {
-                    path: path.into(),
-                    reason: format!("joint '{n}' on {topic} is {v} at {} ns", m.log_time_ns),
-                });
-            }
-            q.push(v);
-        }
-        stamps.push(stamp_of(m, js.header.stamp.as_ns(), opts));
-        positions.push(q);
-    }
-    check_monotonic(path, topic, &stamps)?;
-    Ok(JointSeries {
-        stream: Stream::new(topic, stamps, Some(rate)),
-        positions,
-    })
-}
-
-fn interpolate(series: &JointSeries, (i, j, w): (usize, usize, f64)) -> Vec<f64> {
-    series.positions[i]
-        .iter()
-        .zip(&series.positions[j])
-        .map(|(a, b)| a + w * (b - a))
-        .collect()
-}
-
-/// Stamps and unwrapped TCP poses of a command topic: `PoseStamped` targets as they are, a
-/// leader arm's `JointState` through this arm's kinematics.
-fn command_poses(
-    path: &Path,
-    msgs: &[&RawMessage],
-    arm: &Arm,
-    k: &Kinematics,
-    tcp: &DMat4,
-    opts: &ConvertOptions,
-) -> Result<(Vec<u64>, Vec<[f64; 6]>)> {
-    let mut stamps = Vec::with_capacity(msgs.len());
-    let mut poses = Vec::with_capacity(msgs.len());
-    let topic = msgs.first().map(|m| m.topic.clone()).unwrap_or_default();
-    if msgs
-        .first()
-        .is_some_and(|m| m.message_type.ends_with("/PoseStamped"))
-    {
-        for m in msgs {
-            let p = decode::pose_stamped(path, m)?;
-            let o = p.pose.orientation;
-            let r = glam::DMat3::from_quat(glam::DQuat::from_xyzw(o.x, o.y, o.z, o.w).normalize());
-            let [roll, pitch, yaw] = scaledp_schema::kinematics::rpy_from_rotation(r);
-            stamps.push(stamp_of(m, p.header.stamp.as_ns(), opts));
-            poses.push([
-                p.pose.position.x,
-                p.pose.position.y,
-                p.pose.position.z,
-                roll,
-                pitch,
-                yaw,
-            ]);
-        }
-    } else {
-        let series = joint_series(path, msgs, &topic, &arm.joint_names, arm.rate_hz, opts)?;
-        for q in &series.positions {
-            let flange = fk(k, q).map_err(|e| Error::Rejected {
-                path: path.into(),
-                reason: format!("{topic}: {e}"),
-            })?;
-            poses.push(pose6_from_transform(flange * *tcp));
-        }
-        stamps = series.stream.stamps_ns;
-    }
-    check_monotonic(path, &topic, &stamps)?;
-    for axis in 3..6 {
-        let mut col: Vec<f64> = poses.iter().map(|p| p[axis]).collect();
-        unwrap_angles(&mut col);
-        for (p, v) in poses.iter_mut().zip(col) {
-            p[axis] = v;
-        }
-    }
-    Ok((stamps, poses))
-}
-
-/// Converts one recording.
-pub fn convert(
-    path: &Path,
-    rec: &Recording,
-    frames_store: &dyn FrameStore,
-    opts: &ConvertOptions,
-) -> Result<Episode> {
-    let frames = frames_store;
+/// The rig, rate and task an input is converted with: `--rig`, else the rig stored in the
+/// recording, else one detected; `--topic` overrides applied; the stored task, else `--task`.
+fn rig_and_task(path: &Path, rec: &Recording, opts: &ConvertOptions) -> Result<(Rig, f64, String)> {
     let stored = crate::detect::from_metadata(path, rec)?;
     let mut rig = match (&opts.rig, stored) {
         (Some(r), _) => r.clone(),
@@ -343,6 +168,16 @@ pub fn convert(
         (None, None) => crate::detect::detect(path, rec, opts.fps.unwrap_or(10.0))?,
     };
     crate::detect::override_topics(path, &mut rig, &opts.topic_overrides)?;
+    if rig.arms.is_empty() {
+        return Err(Error::Rejected {
+            path: path.into(),
+            reason: format!(
+                "no arm: rig '{}' has cameras but no arm joint states, and an episode needs a \
+                 state and an action (pass --rig to map an arm's topic)",
+                rig.name
+            ),
+        });
+    }
     let fps = opts.fps.unwrap_or(rig.control_rate_hz);
     let task = crate::detect::task_from_metadata(path, rec)?
         .or_else(|| opts.task.clone())
@@ -350,82 +185,97 @@ pub fn convert(
             path: path.into(),
             reason: "no task instruction: the recording stores none; pass --task".into(),
         })?;
-    let by_topic = |topic: &str| -> Vec<&RawMessage> {
-        rec.messages
-            .iter()
-            .filter(|m| {
-                m.topic == topic
-                    && opts
-                        .window_ns
-                        .is_none_or(|(a, b)| (a..b).contains(&m.log_time_ns))
-            })
-            .collect()
-    };
-    let reject = |reason: String| Error::Rejected {
-        path: path.into(),
-        reason,
-    };
+    Ok((rig, fps, task))
+}
 
-    // Cameras: stamps only; pixels later, for the frames chosen.
-    let in_window = |log_ns: u64| opts.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns));
-    let mut cam_streams = Vec::new();
-    // Per camera: stored ordinal of each frame kept (all of them unless a window is set).
-    let mut cam_ordinals: Vec<Vec<usize>> = Vec::new();
+/// The messages of `topic` logged inside the options' window, in stored order.
+fn messages_of<'r>(rec: &'r Recording, topic: &str, opts: &ConvertOptions) -> Vec<&'r RawMessage> {
+    rec.messages
+        .iter()
+        .filter(|m| m.topic == topic && opts.in_window(m.log_time_ns))
+        .collect()
+}
+
+/// A camera's frames in stamp order: the stream aligned on, and each frame's stored ordinal.
+struct CameraStream {
+    stream: Stream,
+    ordinals: Vec<usize>,
+    reordered: usize,
+}
+
+/// Every camera's frame stamps (only those logged inside the window), put in stamp order.
+fn camera_streams(
+    path: &Path,
+    rig: &Rig,
+    frames: &dyn FrameStore,
+    opts: &ConvertOptions,
+) -> Result<Vec<CameraStream>> {
+    let mut out = Vec::with_capacity(rig.cameras.len());
     for c in &rig.cameras {
         let (ordinals, stamps): (Vec<usize>, Vec<u64>) = frames
             .stamps(&c.topic)
             .into_iter()
             .enumerate()
-            .filter(|(_, (_, log))| in_window(*log))
-            .map(|(i, (header, log))| {
-                (
-                    i,
-                    if opts.use_log_time || header == 0 {
-                        log
-                    } else {
-                        header
-                    },
-                )
-            })
+            .filter(|(_, (_, log))| opts.in_window(*log))
+            .map(|(i, (header, log))| (i, stamp_of(header, log, opts)))
             .unzip();
         if stamps.is_empty() {
-            return Err(reject(format!(
-                "camera '{}' ({}) has no messages",
-                c.name, c.topic
-            )));
+            return Err(Error::Rejected {
+                path: path.into(),
+                reason: format!("camera '{}' ({}) has no messages", c.name, c.topic),
+            });
         }
-        check_monotonic(path, &c.topic, &stamps)?;
-        cam_streams.push(Stream::new(&c.topic, stamps, Some(c.fps)));
-        cam_ordinals.push(ordinals);
+        let ordered = Ordered::new(path, &c.topic, &stamps, opts.reorder_window_ns())?;
+        out.push(CameraStream {
+            stream: Stream::new(
+                &c.topic,
+                ordered.order.iter().map(|&k| stamps[k]).collect(),
+                Some(c.fps),
+            ),
+            ordinals: ordered.order.iter().map(|&k| ordinals[k]).collect(),
+            reordered: ordered.reordered,
+        });
     }
-    // Arms, grippers and command topics.
+    Ok(out)
+}
+
+/// The joint series of every arm and its gripper (in that order, arms in rig order) and each
+/// arm's kinematics.
+fn arm_series(
+    path: &Path,
+    rig: &Rig,
+    rec: &Recording,
+    opts: &ConvertOptions,
+) -> Result<(Vec<JointSeries>, Vec<ArmKinematics>)> {
     let mut series = Vec::new();
     let mut kin = Vec::new();
+    let silent = |what: String| Error::Rejected {
+        path: path.into(),
+        reason: format!("{what} has no messages"),
+    };
     for arm in &rig.arms {
-        let msgs = by_topic(&arm.joint_state_topic);
+        let msgs = messages_of(rec, &arm.joint_state_topic, opts);
         if msgs.is_empty() {
-            return Err(reject(format!(
-                "arm '{}' ({}) has no messages",
+            return Err(silent(format!(
+                "arm '{}' ({})",
                 arm.name, arm.joint_state_topic
             )));
         }
-        series.push(joint_series(
+        let topic = &arm.joint_state_topic;
+        series.push(JointSeries::read(
             path,
             &msgs,
-            &arm.joint_state_topic,
+            topic,
             &arm.joint_names,
             arm.rate_hz,
             opts,
         )?);
         if let Some(g) = &arm.gripper {
-            let gm = by_topic(&g.topic);
+            let gm = messages_of(rec, &g.topic, opts);
             if gm.is_empty() {
-                return Err(reject(format!(
-                    "gripper of '{}' ({}) has no messages",
-                    arm.name, g.topic
-                )));
+                return Err(silent(format!("gripper of '{}' ({})", arm.name, g.topic)));
             }
-            series.push(joint_series(
+            series.push(JointSeries::read(
                 path,
                 &gm,
                 &g.topic,
@@ -434,45 +284,49 @@ pub fn convert(
                 opts,
             )?);
         }
-        kin.push(kinematics(path, arm)?);
+        kin.push(ArmKinematics::new(arm).map_err(|e| Error::input(path, e))?);
     }
-    let streams: Vec<Stream> = series.iter().map(|s| s.stream.clone()).collect();
-    let aligned = align(
-        &cam_streams,
-        &streams,
-        fps,
-        opts.stale_periods,
-        opts.max_invalid_fraction,
-    )
-    .map_err(reject)?;
+    Ok((series, kin))
+}
 
-    // State per tick, per arm: pose of the TCP, unwrapped angles, gripper width.
+/// Per tick: the state (TCP pose with unwrapped angles, gripper opening, per arm) and the joint
+/// positions (arm then gripper joints, per arm).
+struct TickRows {
+    state: Vec<Vec<f32>>,
+    joints: Vec<Vec<f32>>,
+}
+
+/// The [`TickRows`] of every aligned tick.
+fn tick_states(
+    path: &Path,
+    rig: &Rig,
+    series: &[JointSeries],
+    kin: &[ArmKinematics],
+    aligned: &Alignment,
+) -> Result<TickRows> {
     let n_ticks = aligned.ticks_ns.len();
     let mut state_ticks = vec![Vec::new(); n_ticks];
     let mut joint_ticks = vec![Vec::new(); n_ticks];
     let mut s_idx = 0;
-    for (arm, (k, tcp)) in rig.arms.iter().zip(&kin) {
+    for (arm, k) in rig.arms.iter().zip(kin) {
         let arm_series = s_idx;
         let grip_series = arm.gripper.as_ref().map(|_| s_idx + 1);
         s_idx += 1 + usize::from(grip_series.is_some());
         let mut poses = Vec::with_capacity(n_ticks);
         for (t, brackets) in aligned.samples.iter().enumerate() {
-            let q = interpolate(&series[arm_series], brackets[arm_series]);
-            let flange = fk(k, &q).map_err(|e| reject(format!("arm '{}': {e}", arm.name)))?;
-            poses.push(pose6_from_transform(flange * *tcp));
+            let q = series[arm_series].interpolate(brackets[arm_series]);
+            let pose = k.tcp_pose(&q).map_err(|e| Error::Rejected {
+                path: path.into(),
+                reason: format!("arm '{}': {e}", arm.name),
+            })?;
+            poses.push(pose);
             joint_ticks[t].extend(q.iter().map(|&x| x as f32));
         }
-        for axis in 3..6 {
-            let mut col: Vec<f64> = poses.iter().map(|p| p[axis]).collect();
-            unwrap_angles(&mut col);
-            for (p, v) in poses.iter_mut().zip(col) {
-                p[axis] = v;
-            }
-        }
+        unwrap_pose_angles(&mut poses);
         for (t, pose) in poses.iter().enumerate() {
             let width = match (grip_series, &arm.gripper) {
                 (Some(g), Some(gr)) => {
-                    let q = interpolate(&series[g], aligned.samples[t][g]);
+                    let q = series[g].interpolate(aligned.samples[t][g]);
                     joint_ticks[t].extend(q.iter().map(|&x| x as f32));
                     gr.model.width_m(&q)
                 }
@@ -482,14 +336,29 @@ pub fn convert(
             state_ticks[t].push(width as f32);
         }
     }
-    // The action is the next tick's state: the last tick has none and is dropped. An arm with a
-    // command topic takes its pose from the latest command at the tick instead (its gripper
-    // from its gripper's command topic, if any, else still from the next tick).
-    let frames = n_ticks - 1;
-    let state: Vec<f32> = state_ticks[..frames].concat();
-    let mut action: Vec<f32> = state_ticks[1..].concat();
+    Ok(TickRows {
+        state: state_ticks,
+        joints: joint_ticks,
+    })
+}
+
+/// Arms with a command topic take the action's pose from the latest command at each tick
+/// (instead of the next tick's state), its angles put on the state's branch; grippers with a
+/// command topic likewise the action's opening. Returns the messages reordered on those topics.
+#[allow(clippy::too_many_arguments)]
+fn command_actions(
+    path: &Path,
+    rig: &Rig,
+    kin: &[ArmKinematics],
+    rec: &Recording,
+    ticks_ns: &[u64],
+    state_ticks: &[Vec<f32>],
+    action: &mut [f32],
+    opts: &ConvertOptions,
+) -> Result<usize> {
     let dim = 7 * rig.arms.len();
-    for (a, (arm, (k, tcp))) in rig.arms.iter().zip(&kin).enumerate() {
+    let mut reordered = 0;
+    for (a, (arm, k)) in rig.arms.iter().zip(kin).enumerate() {
         // --- gripper command (scaledp-sim, issue 10): a gripper's `command_topic` (a leader
         // gripper's JointState, its joints mapped by name) gives the action's gripper opening:
         // the latest command at each tick.
@@ -498,16 +367,20 @@ pub fn convert(
             .as_ref()
             .and_then(|g| Some((g, g.command_topic.as_ref()?)))
         {
-            let msgs = by_topic(topic);
+            let msgs = messages_of(rec, topic, opts);
             let rate = rig.control_rate_hz;
-            let cmd = joint_series(path, &msgs, topic, &g.joint_names, rate, opts)?;
+            let cmd = JointSeries::read(path, &msgs, topic, &g.joint_names, rate, opts)?;
             if cmd.positions.is_empty() {
-                return Err(reject(format!(
-                    "gripper command topic {topic} of arm '{}' has no messages",
-                    arm.name
-                )));
+                return Err(Error::Rejected {
+                    path: path.into(),
+                    reason: format!(
+                        "gripper command topic {topic} of arm '{}' has no messages",
+                        arm.name
+                    ),
+                });
             }
-            for (t, tick) in aligned.ticks_ns[..frames].iter().enumerate() {
+            reordered += cmd.reordered;
+            for (t, tick) in ticks_ns.iter().enumerate() {
                 let i = cmd.stream.latest_at(*tick).unwrap_or(0);
                 action[t * dim + a * 7 + 6] = g.model.width_m(&cmd.positions[i]) as f32;
             }
@@ -516,15 +389,20 @@ pub fn convert(
         let Some(topic) = &arm.command_topic else {
             continue;
         };
-        let (stamps, poses) = command_poses(path, &by_topic(topic), arm, k, tcp, opts)?;
-        if stamps.is_empty() {
-            return Err(reject(format!(
-                "command topic {topic} of arm '{}' has no messages",
-                arm.name
-            )));
+        let msgs = messages_of(rec, topic, opts);
+        let command = CommandPoses::read(path, &msgs, arm, k, opts)?;
+        if command.stamps_ns.is_empty() {
+            return Err(Error::Rejected {
+                path: path.into(),
+                reason: format!(
+                    "command topic {topic} of arm '{}' has no messages",
+                    arm.name
+                ),
+            });
         }
-        let stream = Stream::new(topic, stamps, None);
-        let chosen: Vec<usize> = aligned.ticks_ns[..frames]
+        reordered += command.reordered;
+        let stream = Stream::new(topic, command.stamps_ns, None);
+        let chosen: Vec<usize> = ticks_ns
             .iter()
             .map(|tick| stream.latest_at(*tick).unwrap_or(0))
             .collect();
@@ -533,51 +411,54 @@ pub fn convert(
         let mut turn = [0.0; 6];
         if let Some(&first) = chosen.first() {
             for (d, shift) in turn.iter_mut().enumerate().skip(3) {
-                let gap = f64::from(state_ticks[0][a * 7 + d]) - poses[first][d];
+                let gap = f64::from(state_ticks[0][a * 7 + d]) - command.poses[first][d];
                 *shift = std::f64::consts::TAU * (gap / std::f64::consts::TAU).round();
             }
         }
         for (t, &i) in chosen.iter().enumerate() {
-            for (d, v) in poses[i].iter().enumerate() {
+            for (d, v) in command.poses[i].iter().enumerate() {
                 action[t * dim + a * 7 + d] = (*v + turn[d]) as f32;
             }
         }
     }
-    let joints: Vec<f32> = joint_ticks[..frames].concat();
-    let t0 = aligned.ticks_ns[0];
-    let timestamps = aligned.ticks_ns[..frames]
-        .iter()
-        .map(|t| ((t - t0) as f64 * 1e-9) as f32)
-        .collect();
+    Ok(reordered)
+}
 
-    // Images: each chosen frame decoded once, resized and encoded, in parallel.
-    let (w, h) = (opts.width, opts.height);
+/// Each camera's chosen frame at each of the first `frames` ticks: decoded, resized and
+/// JPEG-encoded once (in parallel), with the episode's pixel statistics.
+fn camera_frames(
+    path: &Path,
+    rig: &Rig,
+    store: &dyn FrameStore,
+    cams: &[CameraStream],
+    aligned: &Alignment,
+    frames: usize,
+    spec: &EncodeSpec,
+) -> Result<Vec<CameraFrames>> {
     let mut wanted: BTreeMap<String, BTreeSet<usize>> = BTreeMap::new();
     for (ci, cam) in rig.cameras.iter().enumerate() {
         wanted.entry(cam.topic.clone()).or_default().extend(
             aligned.frames[..frames]
                 .iter()
-                .map(|f| cam_ordinals[ci][f[ci]]),
+                .map(|f| cams[ci].ordinals[f[ci]]),
         );
     }
-    let spec = EncodeSpec {
-        width: w,
-        height: h,
-        quality: opts.jpeg_quality,
-    };
-    let done = frames_store.encode(path, &wanted, &spec)?;
+    let done = store.encode(path, &wanted, spec)?;
     let mut cameras = Vec::with_capacity(rig.cameras.len());
     for (ci, cam) in rig.cameras.iter().enumerate() {
         let mut histogram = ChannelHistogram::default();
         let mut jpeg = Vec::with_capacity(frames);
         for f in &aligned.frames[..frames] {
-            let ordinal = cam_ordinals[ci][f[ci]];
-            let e = done.get(&(cam.topic.clone(), ordinal)).ok_or_else(|| {
-                reject(format!(
-                    "frame {} of {} was not found on the second read",
-                    ordinal, cam.topic
-                ))
-            })?;
+            let ordinal = cams[ci].ordinals[f[ci]];
+            let e = done
+                .get(&(cam.topic.clone(), ordinal))
+                .ok_or_else(|| Error::Rejected {
+                    path: path.into(),
+                    reason: format!(
+                        "frame {ordinal} of {} was not found on the second read",
+                        cam.topic
+                    ),
+                })?;
             histogram.absorb(&e.histogram);
             jpeg.push(e.jpeg.clone());
         }
@@ -587,6 +468,77 @@ pub fn convert(
             histogram,
         });
     }
+    Ok(cameras)
+}
+
+/// Converts one recording: picks the rig, aligns the camera and joint streams on a tick grid,
+/// computes state (TCP poses by forward kinematics) and action per tick, and encodes the
+/// frames chosen.
+pub fn convert(
+    path: &Path,
+    rec: &Recording,
+    frames_store: &dyn FrameStore,
+    opts: &ConvertOptions,
+) -> Result<Episode> {
+    let (rig, fps, task) = rig_and_task(path, rec, opts)?;
+    // Cameras: stamps only; pixels later, for the frames chosen.
+    let cams = camera_streams(path, &rig, frames_store, opts)?;
+    let (series, kin) = arm_series(path, &rig, rec, opts)?;
+    let cam_streams: Vec<Stream> = cams.iter().map(|c| c.stream.clone()).collect();
+    let joint_streams: Vec<Stream> = series.iter().map(|s| s.stream.clone()).collect();
+    let mut aligned = align(
+        &cam_streams,
+        &joint_streams,
+        fps,
+        opts.stale_periods,
+        opts.max_invalid_fraction,
+    )
+    .map_err(|reason| Error::Rejected {
+        path: path.into(),
+        reason,
+    })?;
+    let reordered = cams.iter().map(|c| c.reordered);
+    let reordered = reordered.chain(series.iter().map(|s| s.reordered));
+    for (report, n) in aligned.report.streams.iter_mut().zip(reordered) {
+        report.reordered = n;
+    }
+
+    let TickRows {
+        state: state_ticks,
+        joints: joint_ticks,
+    } = tick_states(path, &rig, &series, &kin, &aligned)?;
+    // The action is the next tick's state: the last tick has none and is dropped. An arm with a
+    // command topic takes its pose from the latest command at the tick instead (its gripper
+    // from its gripper's command topic, if any, else still from the next tick).
+    let frames = aligned.ticks_ns.len() - 1;
+    let state: Vec<f32> = state_ticks[..frames].concat();
+    let mut action: Vec<f32> = state_ticks[1..].concat();
+    let reordered_commands = command_actions(
+        path,
+        &rig,
+        &kin,
+        rec,
+        &aligned.ticks_ns[..frames],
+        &state_ticks,
+        &mut action,
+        opts,
+    )?;
+    aligned.report.reordered = aligned
+        .report
+        .streams
+        .iter()
+        .map(|s| s.reordered)
+        .sum::<usize>()
+        + reordered_commands;
+    let joints: Vec<f32> = joint_ticks[..frames].concat();
+    let t0 = aligned.ticks_ns[0];
+    let timestamps = aligned.ticks_ns[..frames]
+        .iter()
+        .map(|t| ((t - t0) as f64 * 1e-9) as f32)
+        .collect();
+
+    let spec = opts.encode_spec();
+    let cameras = camera_frames(path, &rig, frames_store, &cams, &aligned, frames, &spec)?;
     let joint_names = rig
         .arms
         .iter()
@@ -609,7 +561,7 @@ pub fn convert(
         action,
         joints,
         cameras,
-        image_size: (w, h),
+        image_size: (spec.width, spec.height),
         report: aligned.report,
         time_source: if opts.use_log_time {
             "log_time".into()

@@ -78,7 +78,8 @@ impl<'a> ImageView<'a> {
         })
     }
 
-    /// Checks the size, step and data length; returns the layout.
+    /// Checks the size, step and data length; returns the layout. Sizes come from the message,
+    /// so every product is checked (a 4294967295-square image overflows 64 bits).
     fn check(&self) -> Result<(usize, [usize; 3]), String> {
         let (channels, order) = self.layout()?;
         let (w, h, step) = (
@@ -86,18 +87,25 @@ impl<'a> ImageView<'a> {
             self.height as usize,
             self.step as usize,
         );
+        let what = format!("{} image {w}×{h}", self.encoding);
         if w == 0 || h == 0 {
             return Err(format!("empty image {w}×{h}"));
         }
-        if step < w * channels {
+        let row = w
+            .checked_mul(channels)
+            .ok_or_else(|| format!("{what}: absurd width"))?;
+        if step < row {
             return Err(format!(
-                "step {step} is smaller than width {w} × {channels} bytes"
+                "{what}: step {step} is smaller than width {w} × {channels} bytes"
             ));
         }
-        let needed = step * (h - 1) + w * channels;
+        let needed = step
+            .checked_mul(h - 1)
+            .and_then(|b| b.checked_add(row))
+            .ok_or_else(|| format!("{what}: absurd size (step {step})"))?;
         if self.data.len() < needed {
             return Err(format!(
-                "{} data bytes, but {h} rows of step {step} need {needed}",
+                "{what}: {} data bytes, but {h} rows of step {step} need {needed}",
                 self.data.len()
             ));
         }
@@ -226,8 +234,7 @@ pub fn to_rgb(frame: &Frame) -> Result<Rgb, String> {
             data: &img.data,
         }),
         Frame::Compressed(c) => {
-            let img =
-                image::load_from_memory(&c.data).map_err(|e| format!("{} image: {e}", c.format))?;
+            let img = decode_compressed(&c.data).map_err(|e| format!("{} image: {e}", c.format))?;
             let rgb = img.to_rgb8();
             Ok(Rgb {
                 width: rgb.width(),
@@ -236,6 +243,26 @@ pub fn to_rgb(frame: &Frame) -> Result<Rgb, String> {
             })
         }
     }
+}
+
+/// Most pixels of a compressed frame decoded (a 8K frame has 33 M): a header claiming more is
+/// refused before anything is allocated for it.
+const MAX_COMPRESSED_PIXELS: u64 = 64 << 20;
+
+/// Decodes a JPEG or PNG, refusing sizes a camera does not send (a decompression bomb: a few
+/// bytes whose header claims 60000×60000).
+fn decode_compressed(data: &[u8]) -> Result<image::DynamicImage, String> {
+    let reader = image::ImageReader::new(std::io::Cursor::new(data))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?;
+    let (w, h) = reader.into_dimensions().map_err(|e| e.to_string())?;
+    if u64::from(w) * u64::from(h) > MAX_COMPRESSED_PIXELS {
+        return Err(format!(
+            "{w}×{h} pixels, more than the {} M the converter decodes",
+            MAX_COMPRESSED_PIXELS >> 20
+        ));
+    }
+    image::load_from_memory(data).map_err(|e| e.to_string())
 }
 
 /// Resizes with a Lanczos3 convolution (antialiased when shrinking); a no-op at the same size.

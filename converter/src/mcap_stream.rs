@@ -193,7 +193,7 @@ impl Reader<'_> {
             }
             Record::Channel(c) => {
                 let message_type = self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                if c.message_encoding != "cdr" && crate::frames::is_image(&message_type) {
+                if c.message_encoding != "cdr" && crate::source::is_read(&message_type) {
                     return Err(self.bad(format!(
                         "channel {} has message encoding '{}', expected 'cdr'",
                         c.topic, c.message_encoding
@@ -390,6 +390,26 @@ pub fn stream(path: &Path, on_message: &mut OnMessage<'_>) -> Result<(Vec<TopicI
     stream_hashed(path, None, on_message)
 }
 
+/// Refuses a file that does not start with the MCAP magic (empty, or another format named
+/// `.mcap`), then rewinds it.
+fn check_magic(path: &Path, file: &mut File, len: u64) -> Result<()> {
+    use std::io::{Seek, SeekFrom};
+    let mut magic = [0u8; 8];
+    let n = len.min(8) as usize;
+    file.read_exact(&mut magic[..n]).map_err(Error::io(path))?;
+    file.seek(SeekFrom::Start(0)).map_err(Error::io(path))?;
+    if magic[..n] != mcap::MAGIC[..n] {
+        return Err(Error::input(path, "not an MCAP file (no MCAP magic)"));
+    }
+    if n < 8 {
+        return Err(Error::input(
+            path,
+            format!("not an MCAP file: {len} bytes, shorter than the magic"),
+        ));
+    }
+    Ok(())
+}
+
 /// A file read that also feeds a hasher.
 struct Hashing<'h> {
     file: File,
@@ -413,8 +433,9 @@ pub fn stream_hashed(
     hasher: Option<&mut blake3::Hasher>,
     on_message: &mut OnMessage<'_>,
 ) -> Result<(Vec<TopicInfo>, Metadata)> {
-    let file = File::open(path).map_err(Error::io(path))?;
+    let mut file = File::open(path).map_err(Error::io(path))?;
     let len = file.metadata().map_err(Error::io(path))?.len();
+    check_magic(path, &mut file, len)?;
     let hashing = hasher.is_some();
     let mut src = BufReader::with_capacity(1 << 20, Hashing { file, hasher });
     // No record is longer than the file, nor than the largest chunk we accept compressed (LZ4

@@ -10,50 +10,21 @@ use crate::error::{Error, Result};
 use crate::mcap_source::read_mcap;
 use crate::source::{ros2_type_name, RawMessage, Recording, Serialization, TopicInfo};
 
-/// Reads a rosbag2: either a bag directory (it has a `metadata.yaml` and one or more `.mcap` or
-/// `.db3` storage files, read in file-name order and merged) or a standalone `.db3` (or `.mcap`)
-/// file. Returns its topics (counts summed over the storage files), the messages of the topics
-/// `want` accepts sorted by log time, and the metadata records of mcap storage.
+/// Reads a rosbag2: either a bag directory (its `metadata.yaml` lists the storage files, `.mcap`
+/// or `.db3`, read in that order and merged) or a standalone `.db3` (or `.mcap`) file. Returns
+/// its topics (counts summed over the storage files), the messages of the topics `want` accepts
+/// sorted by log time, and the metadata records of mcap storage.
 ///
-/// `metadata.yaml` only marks the directory as a bag; its content is not read (the storage
-/// files say everything needed). For split bags `want` sees each file's topics with that file's
-/// counts. Compressed storage files (`.mcap.zstd`, `.db3.zstd`) are rejected with a hint.
-/// sqlite3 topics must be `cdr`-serialized.
+/// Of `metadata.yaml` only `relative_file_paths` is read (see [`storage_files`]): every path must
+/// stay inside the bag directory and exist. For split bags `want` sees each file's topics with
+/// that file's counts. Compressed storage files (`.mcap.zstd`, `.db3.zstd`) are rejected with a
+/// hint. sqlite3 topics must be `cdr`-serialized.
 pub fn read_rosbag2(path: &Path, want: &dyn Fn(&TopicInfo) -> bool) -> Result<Recording> {
     let meta = std::fs::metadata(path).map_err(Error::io(path))?;
     if !meta.is_dir() {
         return read_storage(path, want);
     }
-    if !path.join("metadata.yaml").is_file() {
-        return Err(Error::input(
-            path,
-            "not a rosbag2 directory (no metadata.yaml)",
-        ));
-    }
-    let mut files: Vec<PathBuf> = Vec::new();
-    for entry in std::fs::read_dir(path).map_err(Error::io(path))? {
-        let p = entry.map_err(Error::io(path))?.path();
-        let name = p
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        if name.ends_with(".mcap.zstd") || name.ends_with(".db3.zstd") {
-            return Err(Error::input(
-                &p,
-                "compressed rosbag2 storage is not supported; decompress it first (`ros2 bag convert`)",
-            ));
-        }
-        if p.is_file() && (name.ends_with(".mcap") || name.ends_with(".db3")) {
-            files.push(p);
-        }
-    }
-    files.sort();
-    if files.is_empty() {
-        return Err(Error::input(
-            path,
-            "rosbag2 directory has no .mcap or .db3 storage file",
-        ));
-    }
+    let files = storage_files(path)?;
     let mut topics: BTreeMap<String, TopicInfo> = BTreeMap::new();
     let mut out = Recording::default();
     for file in &files {
@@ -72,6 +43,124 @@ pub fn read_rosbag2(path: &Path, want: &dyn Fn(&TopicInfo) -> bool) -> Result<Re
     out.messages.sort_by_key(|m| m.log_time_ns);
     out.topics = topics.into_values().collect();
     Ok(out)
+}
+
+/// The storage files a bag directory's `metadata.yaml` lists in `relative_file_paths`, checked:
+/// the file is rosbag2 metadata, each path is relative and stays inside the directory, each
+/// file exists and is not compressed.
+///
+/// rosbag2 (yaml-cpp) and `rosbags` write the block style `relative_file_paths:` then one
+/// `- name` line per file; a flow list `[a, b]` is read too. Nothing else of the file is parsed:
+/// the storage files hold everything the converter needs.
+fn storage_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let yaml = dir.join("metadata.yaml");
+    if !yaml.is_file() {
+        return Err(Error::input(
+            dir,
+            "not a rosbag2 directory (no metadata.yaml)",
+        ));
+    }
+    let text = std::fs::read_to_string(&yaml).map_err(Error::io(&yaml))?;
+    let names = relative_file_paths(&text).map_err(|reason| Error::input(&yaml, reason))?;
+    if let Some(format) = compression_format(&text) {
+        return Err(Error::input(
+            &yaml,
+            format!(
+                "compressed rosbag2 storage (compression_format: {format}) is not supported; \
+                 decompress it first (`ros2 bag convert`)"
+            ),
+        ));
+    }
+    let mut files = Vec::with_capacity(names.len());
+    for name in names {
+        let mut rel = Path::new(&name);
+        // Bags of metadata version < 4 (ROS 2 Foxy) list paths from the bag's parent
+        // directory: `bag/bag_0.db3`.
+        if let Ok(inner) = rel.strip_prefix(dir.file_name().unwrap_or_default()) {
+            if !dir.join(rel).exists() && dir.join(inner).is_file() {
+                rel = inner;
+            }
+        }
+        let inside = rel
+            .components()
+            .all(|c| matches!(c, std::path::Component::Normal(_)));
+        if !inside {
+            return Err(Error::input(
+                &yaml,
+                format!("storage file '{name}' is outside the bag directory"),
+            ));
+        }
+        let p = dir.join(rel);
+        if name.ends_with(".mcap.zstd") || name.ends_with(".db3.zstd") {
+            return Err(Error::input(
+                &p,
+                "compressed rosbag2 storage is not supported; decompress it first (`ros2 bag convert`)",
+            ));
+        }
+        if !p.is_file() {
+            return Err(Error::input(
+                &yaml,
+                format!("lists storage file '{name}', which is missing"),
+            ));
+        }
+        files.push(p);
+    }
+    Ok(files)
+}
+
+/// The `compression_format` of rosbag2 metadata, when it names one (file or message
+/// compression).
+fn compression_format(text: &str) -> Option<String> {
+    text.lines()
+        .find_map(|l| l.trim_start().strip_prefix("compression_format:"))
+        .map(|v| v.trim().trim_matches(|c| c == '\'' || c == '"').to_string())
+        .filter(|v| !v.is_empty())
+}
+
+/// The `relative_file_paths` of rosbag2 metadata (see [`storage_files`]).
+pub(crate) fn relative_file_paths(text: &str) -> std::result::Result<Vec<String>, String> {
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    if !lines
+        .next()
+        .is_some_and(|l| l.starts_with("rosbag2_bagfile_information:"))
+    {
+        return Err(
+            "not rosbag2 metadata (it must start with 'rosbag2_bagfile_information:')".into(),
+        );
+    }
+    let unquote = |s: &str| s.trim().trim_matches(|c| c == '\'' || c == '"').to_string();
+    let mut names = Vec::new();
+    let mut lines = text.lines().peekable();
+    while let Some(line) = lines.next() {
+        let Some(rest) = line.trim_start().strip_prefix("relative_file_paths:") else {
+            continue;
+        };
+        let rest = rest.trim();
+        if let Some(flow) = rest.strip_prefix('[') {
+            let flow = flow
+                .strip_suffix(']')
+                .ok_or("relative_file_paths: unterminated list")?;
+            names.extend(flow.split(',').map(unquote).filter(|n| !n.is_empty()));
+        } else if !rest.is_empty() {
+            return Err(format!("relative_file_paths: unexpected '{rest}'"));
+        }
+        let indent = line.len() - line.trim_start().len();
+        while let Some(item) = lines.peek() {
+            let at = item.len() - item.trim_start().len();
+            match item.trim_start().strip_prefix('-') {
+                Some(name) if at >= indent => names.push(unquote(name)),
+                _ => break,
+            }
+            lines.next();
+        }
+        break;
+    }
+    if names.is_empty() {
+        return Err("lists no storage files (relative_file_paths)".into());
+    }
+    Ok(names)
 }
 
 /// One storage file, by extension.

@@ -50,6 +50,18 @@ pub struct Recording {
     pub metadata: BTreeMap<String, BTreeMap<String, String>>,
 }
 
+/// Whether the converter reads messages of this type (cameras, joint states, pose commands):
+/// a channel of one must be `cdr`-encoded.
+pub(crate) fn is_read(message_type: &str) -> bool {
+    matches!(
+        message_type,
+        "sensor_msgs/msg/Image"
+            | "sensor_msgs/msg/CompressedImage"
+            | "sensor_msgs/msg/JointState"
+            | "geometry_msgs/msg/PoseStamped"
+    )
+}
+
 /// `sensor_msgs/Image` → `sensor_msgs/msg/Image`; ROS 2 names pass through.
 pub fn ros2_type_name(name: &str) -> String {
     let parts: Vec<&str> = name.split('/').collect();

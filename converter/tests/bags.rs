@@ -242,7 +242,8 @@ fn damaged_inputs_are_errors() {
         }
     }
 
-    // rosbag2: no metadata.yaml, no storage file, a truncated db3, a non-cdr topic.
+    // rosbag2: no metadata.yaml, metadata listing no storage file or a missing one, a
+    // truncated db3, a non-cdr topic.
     let bare = work.path().join("bare");
     std::fs::create_dir(&bare).unwrap();
     assert!(read_rosbag2(&bare, &all)
@@ -254,10 +255,31 @@ fn damaged_inputs_are_errors() {
         "rosbag2_bagfile_information: {}\n",
     )
     .unwrap();
-    assert!(read_rosbag2(&bare, &all)
-        .unwrap_err()
-        .to_string()
-        .contains("no .mcap or .db3"));
+    let e = read_rosbag2(&bare, &all).unwrap_err().to_string();
+    assert!(e.contains("lists no storage files"), "{e}");
+    std::fs::write(
+        bare.join("metadata.yaml"),
+        "rosbag2_bagfile_information:\n  relative_file_paths:\n  - bare_0.db3\n",
+    )
+    .unwrap();
+    let e = read_rosbag2(&bare, &all).unwrap_err().to_string();
+    assert!(e.contains("'bare_0.db3', which is missing"), "{e}");
+    // A Foxy bag (metadata version < 4) lists its files from the parent directory.
+    let foxy = work.path().join("foxy");
+    std::fs::create_dir(&foxy).unwrap();
+    std::fs::copy(
+        fx.dir
+            .path()
+            .join("franka_rosbag2_sqlite3/franka_rosbag2_sqlite3.db3"),
+        foxy.join("foxy_0.db3"),
+    )
+    .unwrap();
+    std::fs::write(
+        foxy.join("metadata.yaml"),
+        "rosbag2_bagfile_information:\n  version: 3\n  relative_file_paths:\n    - foxy/foxy_0.db3\n",
+    )
+    .unwrap();
+    assert!(!read_rosbag2(&foxy, &all).unwrap().messages.is_empty());
     let db3 = fx
         .dir
         .path()
@@ -290,7 +312,12 @@ fn damaged_inputs_are_errors() {
     let bytes = std::fs::read(&mcap).unwrap();
     let cut_dir = work.path().join("cut_mcap");
     std::fs::create_dir(&cut_dir).unwrap();
-    std::fs::write(cut_dir.join("metadata.yaml"), "x: 1\n").unwrap();
+    std::fs::write(
+        cut_dir.join("metadata.yaml"),
+        "rosbag2_bagfile_information:\n  relative_file_paths: [cut.mcap]\n",
+    )
+    .unwrap();
     std::fs::write(cut_dir.join("cut.mcap"), &bytes[..bytes.len() * 2 / 3]).unwrap();
-    assert!(read_rosbag2(&cut_dir, &all).is_err());
+    let e = read_rosbag2(&cut_dir, &all).unwrap_err().to_string();
+    assert!(e.contains("cut.mcap") && e.contains("truncated"), "{e}");
 }

@@ -331,6 +331,10 @@ fn write_episodes(root: &Path, s: &Sidecar, staged: &mut Staged) -> Result<()> {
         "scaledp/dropped_frames".into(),
         u(|e| e.report.streams.iter().map(|r| r.dropped).sum()),
     ));
+    cols.push((
+        "scaledp/reordered_messages".into(),
+        u(|e| e.report.reordered as u64),
+    ));
     let batch = col::batch(cols, vec![])?;
     stage_parquet(
         &root.join("meta/episodes/chunk-000/file-000.parquet"),

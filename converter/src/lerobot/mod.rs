@@ -247,8 +247,48 @@ impl Dataset {
         }
     }
 
+    /// An episode's arrays must have the shapes its names announce: a bug upstream (or an
+    /// episode built by hand) is refused here, for this input, instead of failing the column
+    /// writer with a message about arrays.
+    fn check_shapes(ep: &Episode) -> Result<()> {
+        let n = ep.len();
+        let (dim, joints) = (ep.state_names.len(), ep.joint_names.len());
+        let wrong = if n == 0 {
+            Some("no frames".to_string())
+        } else if dim == 0 {
+            Some("no state dimensions (no arm)".into())
+        } else if ep.state.len() != n * dim || ep.action.len() != n * dim {
+            Some(format!(
+                "{} state and {} action values for {n} frames of {dim} dimensions",
+                ep.state.len(),
+                ep.action.len()
+            ))
+        } else if ep.joints.len() != n * joints {
+            Some(format!(
+                "{} joint values for {n} frames of {joints} joints",
+                ep.joints.len()
+            ))
+        } else {
+            ep.cameras.iter().find(|c| c.jpeg.len() != n).map(|c| {
+                format!(
+                    "camera '{}' has {} frames, the episode {n}",
+                    c.name,
+                    c.jpeg.len()
+                )
+            })
+        };
+        match wrong {
+            Some(why) => Err(Error::Rejected {
+                path: ep.source.clone(),
+                reason: format!("malformed episode: {why}"),
+            }),
+            None => Ok(()),
+        }
+    }
+
     /// Appends a converted episode and commits it.
     pub fn add(&mut self, ep: &Episode, source_hash: &str) -> Result<EpisodeRecord> {
+        Self::check_shapes(ep)?;
         self.check_layout(ep)?;
         if self.sidecar.is_none() {
             self.sidecar = Some(Sidecar {
