@@ -13,6 +13,7 @@ pub mod frames;
 pub mod images;
 mod kinematics;
 pub mod lerobot;
+pub mod live;
 mod lz4;
 mod mcap_source;
 mod mcap_stream;
