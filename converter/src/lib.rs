@@ -10,6 +10,8 @@ mod encode_pool;
 pub mod episode;
 mod error;
 pub mod frames;
+#[cfg(test)]
+mod fuzz;
 pub mod images;
 mod kinematics;
 pub mod lerobot;
