@@ -3,6 +3,7 @@
 //! streaming mode from the [`Cache`] of open episodes).
 
 use std::ops::Range;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use rayon::prelude::*;
@@ -48,7 +49,9 @@ pub struct Batch {
     pub frame_index: Vec<i64>,
 }
 
-/// Builds the batch of `order[range]`.
+/// Builds the batch of `order[range]`. A sample whose images cannot be read or decoded fails
+/// the batch, or with [`crate::LoaderOptions::skip_bad_samples`] is left out of it (counted,
+/// logged) while the loader's budget lasts: the batch is then shorter than the range.
 pub(crate) fn assemble(
     shared: &Shared,
     order: &[Sample],
@@ -85,8 +88,15 @@ pub(crate) fn assemble(
     };
     // Streaming: read the episodes this batch needs that are not open yet.
     let mut cache = cache;
-    if let Some(cache) = cache.as_deref_mut() {
-        cache.load(shared, samples)?;
+    let unread = match cache.as_deref_mut() {
+        Some(cache) => cache.load(shared, samples)?,
+        None => Vec::new(),
+    };
+    let mut unread_eps = std::collections::HashSet::new();
+    let mut budget = Budget(shared);
+    for (episode, e) in unread {
+        budget.spend(e)?;
+        unread_eps.insert(episode);
     }
     let open = cache.as_deref().map(Cache::open);
     // One slice per sample of each buffer, empty ones too (no cameras, a 0-wide state): a
@@ -96,7 +106,7 @@ pub(crate) fn assemble(
     let action = rows(&mut batch.action, c * a_dim, b);
     let obs_pad = rows(&mut batch.obs_is_pad, to, b);
     let act_pad = rows(&mut batch.action_is_pad, c, b);
-    shared.pool.install(|| {
+    let filled: Vec<Result<bool>> = shared.pool.install(|| {
         images
             .into_par_iter()
             .zip(state)
@@ -104,14 +114,79 @@ pub(crate) fn assemble(
             .zip(obs_pad)
             .zip(act_pad)
             .zip(samples.par_iter())
-            .try_for_each(|(((((img, st), ac), op), ap), s)| {
-                fill(shared, s, open, img, st, ac, op, ap, plane)
+            .map(|(((((img, st), ac), op), ap), s)| {
+                if unread_eps.contains(&s.episode) {
+                    return Ok(false);
+                }
+                fill(shared, s, open, img, st, ac, op, ap, plane).map(|()| true)
             })
-    })?;
+            .collect()
+    });
     if let Some(cache) = cache {
         cache.release(shared, range, samples);
     }
+    let mut keep = Vec::with_capacity(b);
+    for r in filled {
+        match r {
+            Ok(k) => keep.push(k),
+            Err(e) => {
+                budget.spend(e)?;
+                keep.push(false);
+            }
+        }
+    }
+    if keep.iter().any(|k| !k) {
+        batch.retain(&keep, per_sample);
+    }
     Ok(batch)
+}
+
+/// The loader's budget of bad samples (see [`crate::LoaderOptions::skip_bad_samples`]).
+struct Budget<'a>(&'a Shared);
+
+impl Budget<'_> {
+    /// Counts one bad sample, or one episode that could not be read (its samples in the batch
+    /// are left out together); the error itself once the budget is spent.
+    fn spend(&mut self, e: Error) -> Result<()> {
+        let budget = self.0.opts.skip_bad_samples as u64;
+        if budget == 0 {
+            return Err(e);
+        }
+        let skipped = self.0.skipped.fetch_add(1, Ordering::Relaxed) + 1;
+        if skipped > budget {
+            tracing::error!("{budget} bad samples skipped already: giving up");
+            return Err(e);
+        }
+        tracing::warn!("bad sample skipped ({skipped} of at most {budget}): {e}");
+        Ok(())
+    }
+}
+
+impl Batch {
+    /// Keeps the samples whose `keep` is true (in order); `per_sample` image bytes each.
+    fn retain(&mut self, keep: &[bool], per_sample: usize) {
+        fn compact<T: Copy>(v: &mut Vec<T>, stride: usize, keep: &[bool]) {
+            let mut to = 0;
+            for (i, &k) in keep.iter().enumerate() {
+                if k {
+                    if to != i {
+                        v.copy_within(i * stride..(i + 1) * stride, to * stride);
+                    }
+                    to += 1;
+                }
+            }
+            v.truncate(to * stride);
+        }
+        let (to, c) = (self.obs_horizon, self.action_chunk);
+        compact(&mut self.images, per_sample, keep);
+        compact(&mut self.state, to * self.state_dim, keep);
+        compact(&mut self.action, c * self.action_dim, keep);
+        compact(&mut self.obs_is_pad, to, keep);
+        compact(&mut self.action_is_pad, c, keep);
+        compact(&mut self.episode_index, 1, keep);
+        compact(&mut self.frame_index, 1, keep);
+        self.len = keep.iter().filter(|&&k| k).count();
+    }
 }
 
 /// `buf` as `n` consecutive slices of `stride` elements (all empty when `stride` is 0).

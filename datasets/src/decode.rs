@@ -37,6 +37,7 @@ pub fn decode_rgb(encoded: &[u8], out: &mut Vec<u8>) -> Result<(u32, u32), Strin
         let mut d = JpegDecoder::new_with_options(ZCursor::new(encoded), options);
         d.decode_headers().map_err(|e| format!("JPEG: {e:?}"))?;
         let info = d.info().ok_or("JPEG without a frame header")?;
+        check_pixels(u32::from(info.width), u32::from(info.height))?;
         let size = d.output_buffer_size().ok_or("JPEG too large")?;
         out.resize(size, 0);
         d.decode_into(out).map_err(|e| format!("JPEG: {e:?}"))?;
@@ -46,6 +47,11 @@ pub fn decode_rgb(encoded: &[u8], out: &mut Vec<u8>) -> Result<(u32, u32), Strin
         }
         Ok((w, h))
     } else {
+        let reader = image::ImageReader::new(std::io::Cursor::new(encoded))
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?;
+        let (w, h) = reader.into_dimensions().map_err(|e| e.to_string())?;
+        check_pixels(w, h)?;
         let img = image::load_from_memory(encoded)
             .map_err(|e| e.to_string())?
             .to_rgb8();
@@ -54,6 +60,20 @@ pub fn decode_rgb(encoded: &[u8], out: &mut Vec<u8>) -> Result<(u32, u32), Strin
         out.extend_from_slice(img.as_raw());
         Ok((w, h))
     }
+}
+
+/// Most pixels of a stored image decoded (8K UHD has 33 M): a header claiming more is refused
+/// before anything is allocated for it.
+const MAX_PIXELS: u64 = 36 << 20;
+
+fn check_pixels(w: u32, h: u32) -> Result<(), String> {
+    if w == 0 || h == 0 || u64::from(w) * u64::from(h) > MAX_PIXELS {
+        return Err(format!(
+            "image of {w}×{h} pixels (1 to {} M are decoded)",
+            MAX_PIXELS >> 20
+        ));
+    }
+    Ok(())
 }
 
 fn resize(src: &[u8], w: u32, h: u32, dw: u32, dh: u32, out: &mut Vec<u8>) -> Result<(), String> {

@@ -52,6 +52,150 @@ fn check_batch_size(
     Ok(())
 }
 
+/// Options that make no loader, whatever the dataset.
+fn check_options(opts: &LoaderOptions) -> std::result::Result<(), String> {
+    if opts.obs_horizon == 0 || opts.action_chunk == 0 || opts.batch_size == 0 {
+        return Err("obs_horizon, action_chunk and batch_size must be at least 1".into());
+    }
+    if opts.world_size == 0 || opts.rank >= opts.world_size {
+        return Err(format!(
+            "rank {} of world size {}",
+            opts.rank, opts.world_size
+        ));
+    }
+    if opts.obs_horizon > MAX_WINDOW
+        || opts.action_chunk > MAX_WINDOW
+        || opts.action_offset > MAX_WINDOW
+        || opts.drop_first > u32::MAX as usize
+        || opts.drop_last > u32::MAX as usize
+    {
+        return Err(format!(
+            "obs_horizon, action_chunk and action_offset must be at most {MAX_WINDOW}, drop_first and drop_last at most {}",
+            u32::MAX
+        ));
+    }
+    if !(0.0..=1.0).contains(&opts.val_ratio) {
+        return Err(format!("val_ratio {} outside [0, 1]", opts.val_ratio));
+    }
+    Ok(())
+}
+
+/// The image features to load (keys), in order: all of them, or those the options name (by
+/// short name or key). Video features are refused.
+fn pick_cameras(meta: &Meta, opts: &LoaderOptions, info_file: &str) -> Result<Vec<String>> {
+    for key in [&opts.state_key, &opts.action_key] {
+        if !meta.features.contains_key(key) {
+            return Err(Error::format(info_file, format!("no feature {key}")));
+        }
+    }
+    let all_cams = meta.image_keys();
+    let cameras: Vec<String> = match &opts.cameras {
+        None => all_cams.clone(),
+        Some(names) => names
+            .iter()
+            .map(|n| {
+                [n.clone(), format!("observation.images.{n}")]
+                    .into_iter()
+                    .find(|k| all_cams.contains(k))
+                    .ok_or_else(|| {
+                        Error::format(info_file, format!("no camera {n} (cameras: {all_cams:?})"))
+                    })
+            })
+            .collect::<Result<_>>()?,
+    };
+    for c in &cameras {
+        if meta.features[c].dtype == "video" {
+            return Err(Error::format(
+                info_file,
+                format!("{c} is stored as video; this loader reads image features (convert with images)"),
+            ));
+        }
+    }
+    Ok(cameras)
+}
+
+/// The batch's image size: the options', else the cameras' common stored size; checked to make
+/// a batch buffer that can be allocated.
+fn image_size(
+    meta: &Meta,
+    opts: &LoaderOptions,
+    cameras: &[String],
+) -> std::result::Result<(u32, u32), String> {
+    let (width, height) = match opts.image_size {
+        Some(s) => s,
+        None => {
+            let sizes: Vec<Option<(u32, u32)>> = cameras
+                .iter()
+                .map(|c| meta.features[c].image_size())
+                .collect();
+            match sizes.first() {
+                None => (0, 0),
+                Some(Some(s)) if sizes.iter().all(|x| *x == Some(*s)) => *s,
+                _ => {
+                    let shapes: Vec<&Vec<usize>> =
+                        cameras.iter().map(|c| &meta.features[c].shape).collect();
+                    return Err(format!(
+                        "cameras of different or unknown shapes {shapes:?}: choose an image_size"
+                    ));
+                }
+            }
+        }
+    };
+    if !cameras.is_empty() {
+        check_batch_size(opts, cameras.len(), width, height)?;
+    }
+    Ok((width, height))
+}
+
+/// The data files must hold what `info.json` announces: its state and action widths, and (when
+/// it gives them) its episode and frame totals — a data file missing or cut short otherwise
+/// loses episodes without a word.
+fn check_data(meta: &Meta, data: &Data, opts: &LoaderOptions, info_file: &str) -> Result<()> {
+    for (key, dim) in [
+        (&opts.state_key, data.state_dim),
+        (&opts.action_key, data.action_dim),
+    ] {
+        let shape = &meta.features[key].shape;
+        let want: usize = shape.iter().product();
+        if want != dim {
+            return Err(Error::format(
+                info_file,
+                format!(
+                    "{key} has shape {shape:?}, but the data files hold {dim} values per frame"
+                ),
+            ));
+        }
+    }
+    if let Some((episodes, frames)) = meta.totals {
+        let found = data.episodes.len();
+        let rows: usize = data.episodes.iter().map(|e| e.len).sum();
+        if (found, rows) != (episodes, frames) {
+            return Err(Error::format(
+                info_file,
+                format!(
+                    "total_episodes {episodes} and total_frames {frames}, but the data files hold \
+                     {found} episodes of {rows} frames: a data file is missing or cut short"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The decoding pool: `threads` threads, or one per available core for 0.
+fn decode_pool(threads: usize) -> Result<rayon::ThreadPool> {
+    let threads = if threads == 0 {
+        std::thread::available_parallelism().map_or(1, usize::from)
+    } else {
+        threads
+    };
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("scaledp-decode-{i}"))
+        .build()
+        .map_err(|e| Error::Options(format!("cannot start {threads} decoding threads: {e}")))
+}
+
 /// Where a loader stands: the epoch and the samples already yielded in it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct LoaderState {
@@ -99,6 +243,9 @@ pub(crate) struct Shared {
     samples: Vec<Sample>,
     /// Image buffers handed back for the next batches.
     pub spare: ImagePool,
+    /// Samples left out because their images could not be read (see
+    /// [`LoaderOptions::skip_bad_samples`]).
+    pub skipped: AtomicU64,
 }
 
 /// Where consumers hand batches' image buffers back ([`Loader::recycle`], or
@@ -147,8 +294,12 @@ impl ImagePool {
     }
 }
 
+/// What the prefetch thread hands over: a batch (None when every sample of its range was
+/// skipped) and how many samples of the order it used.
+type Prepared = Result<(Option<Batch>, usize)>;
+
 struct Producer {
-    rx: Receiver<Result<Batch>>,
+    rx: Receiver<Prepared>,
     stop: Arc<AtomicBool>,
     handle: Option<JoinHandle<()>>,
 }
@@ -195,90 +346,13 @@ impl std::fmt::Debug for Loader {
 
 impl Loader {
     pub(crate) fn open(location: &str, opts: LoaderOptions) -> Result<Self> {
-        let bad = |m: String| Err(Error::Options(format!("{location}: {m}")));
-        if opts.obs_horizon == 0 || opts.action_chunk == 0 || opts.batch_size == 0 {
-            return bad("obs_horizon, action_chunk and batch_size must be at least 1".into());
-        }
-        if opts.world_size == 0 || opts.rank >= opts.world_size {
-            return bad(format!(
-                "rank {} of world size {}",
-                opts.rank, opts.world_size
-            ));
-        }
-        if opts.obs_horizon > MAX_WINDOW
-            || opts.action_chunk > MAX_WINDOW
-            || opts.action_offset > MAX_WINDOW
-            || opts.drop_first > u32::MAX as usize
-            || opts.drop_last > u32::MAX as usize
-        {
-            return bad(format!(
-                "obs_horizon, action_chunk and action_offset must be at most {MAX_WINDOW}, drop_first and drop_last at most {}",
-                u32::MAX
-            ));
-        }
-        if !(0.0..=1.0).contains(&opts.val_ratio) {
-            return bad(format!("val_ratio {} outside [0, 1]", opts.val_ratio));
-        }
+        check_options(&opts).map_err(|m| Error::Options(format!("{location}: {m}")))?;
         let store = Store::open(location)?;
         let meta = Meta::read(&store)?;
         let info_file = store.describe("meta/info.json");
-        let feature = |key: &str| {
-            meta.features
-                .get(key)
-                .ok_or_else(|| Error::format(info_file.clone(), format!("no feature {key}")))
-        };
-        let (state_f, action_f) = (feature(&opts.state_key)?, feature(&opts.action_key)?);
-        let all_cams = meta.image_keys();
-        let cameras: Vec<String> = match &opts.cameras {
-            None => all_cams.clone(),
-            Some(names) => names
-                .iter()
-                .map(|n| {
-                    [n.clone(), format!("observation.images.{n}")]
-                        .into_iter()
-                        .find(|k| all_cams.contains(k))
-                        .ok_or_else(|| {
-                            Error::format(
-                                info_file.clone(),
-                                format!("no camera {n} (cameras: {all_cams:?})"),
-                            )
-                        })
-                })
-                .collect::<Result<_>>()?,
-        };
-        for c in &cameras {
-            if meta.features[c].dtype == "video" {
-                return Err(Error::format(
-                    info_file,
-                    format!("{c} is stored as video; this loader reads image features (convert with images)"),
-                ));
-            }
-        }
-        let (width, height) = match opts.image_size {
-            Some(s) => s,
-            None => {
-                let sizes: Vec<Option<(u32, u32)>> = cameras
-                    .iter()
-                    .map(|c| meta.features[c].image_size())
-                    .collect();
-                match sizes.first() {
-                    None => (0, 0),
-                    Some(Some(s)) if sizes.iter().all(|x| *x == Some(*s)) => *s,
-                    _ => {
-                        let shapes: Vec<&Vec<usize>> =
-                            cameras.iter().map(|c| &meta.features[c].shape).collect();
-                        return bad(format!(
-                            "cameras of different or unknown shapes {shapes:?}: choose an image_size"
-                        ));
-                    }
-                }
-            }
-        };
-        if !cameras.is_empty() {
-            if let Err(why) = check_batch_size(&opts, cameras.len(), width, height) {
-                return bad(why);
-            }
-        }
+        let cameras = pick_cameras(&meta, &opts, &info_file)?;
+        let (width, height) = image_size(&meta, &opts, &cameras)
+            .map_err(|m| Error::Options(format!("{location}: {m}")))?;
         let bytes_read = Arc::new(AtomicU64::new(0));
         let data = Data::open(
             &store,
@@ -286,6 +360,7 @@ impl Loader {
             &opts.action_key,
             bytes_read.clone(),
         )?;
+        check_data(&meta, &data, &opts, &info_file)?;
         let stats_file = store.describe("meta/stats.json");
         let norm = Normalizer {
             state: Affine::new(
@@ -314,8 +389,8 @@ impl Loader {
         let lens: Vec<usize> = episodes.iter().map(|e| e.len).collect();
         let samples = sampler::samples(&lens, opts.drop_first, opts.drop_last);
         if samples.is_empty() {
-            return bad(format!(
-                "no samples: {} of {} episodes chosen ({:?} split, val_ratio {}, max_episodes {:?}), {} frames, drop_first {} / drop_last {}",
+            return Err(Error::Options(format!(
+                "{location}: no samples: {} of {} episodes chosen ({:?} split, val_ratio {}, max_episodes {:?}), {} frames, drop_first {} / drop_last {}",
                 episodes.len(),
                 data.episodes.len(),
                 opts.split,
@@ -324,18 +399,12 @@ impl Loader {
                 lens.iter().sum::<usize>(),
                 opts.drop_first,
                 opts.drop_last
-            ));
+            )));
         }
-        let threads = if opts.threads == 0 {
-            std::thread::available_parallelism().map_or(1, usize::from)
-        } else {
-            opts.threads
-        };
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("scaledp-decode-{i}"))
-            .build()
-            .map_err(|e| Error::Options(format!("cannot start {threads} decoding threads: {e}")))?;
+        let (state_f, action_f) = (
+            &meta.features[&opts.state_key],
+            &meta.features[&opts.action_key],
+        );
         let info = DatasetInfo {
             location: location.to_string(),
             fps: meta.fps,
@@ -349,14 +418,16 @@ impl Loader {
             frames: lens.iter().sum(),
             total_episodes: data.episodes.len(),
         };
+        let pool = decode_pool(opts.threads)?;
         tracing::debug!(
-            "{location}: {} of {} episodes, {} samples, {} cameras {}×{}, {threads} threads",
+            "{location}: {} of {} episodes, {} samples, {} cameras {}×{}, {} threads",
             info.episodes.len(),
             info.total_episodes,
             samples.len(),
             info.cameras.len(),
             width,
-            height
+            height,
+            pool.current_num_threads()
         );
         let opts_prefetch = opts.prefetch.max(1);
         let shared = Arc::new(Shared {
@@ -368,6 +439,7 @@ impl Loader {
             pool,
             samples,
             spare: ImagePool::new(opts_prefetch + 2),
+            skipped: AtomicU64::new(0),
         });
         let mut loader = Loader {
             shared,
@@ -504,21 +576,34 @@ impl Loader {
         if self.producer.is_none() {
             self.producer = Some(self.spawn());
         }
-        let got = self.producer.as_ref().map(|p| p.rx.recv());
-        match got {
-            Some(Ok(Ok(batch))) => {
-                self.position += batch.len as u64;
-                Some(Ok(batch))
-            }
-            Some(Ok(Err(e))) => {
-                self.producer = None;
-                Some(Err(e))
-            }
-            _ => {
-                self.producer = None;
-                Some(Err(Error::Stopped("no batch came".into())))
+        loop {
+            let got = self.producer.as_ref().map(|p| p.rx.recv());
+            match got {
+                Some(Ok(Ok((batch, used)))) => {
+                    self.position += used as u64;
+                    match batch {
+                        Some(batch) => return Some(Ok(batch)),
+                        // Every sample of that range was skipped: on to the next.
+                        None if self.position < self.len() as u64 => continue,
+                        None => return None,
+                    }
+                }
+                Some(Ok(Err(e))) => {
+                    self.producer = None;
+                    return Some(Err(e));
+                }
+                _ => {
+                    self.producer = None;
+                    return Some(Err(Error::Stopped("no batch came".into())));
+                }
             }
         }
+    }
+
+    /// Samples left out of batches so far because their images could not be read or decoded
+    /// (see [`LoaderOptions::skip_bad_samples`]).
+    pub fn skipped_samples(&self) -> u64 {
+        self.shared.skipped.load(Ordering::Relaxed)
     }
 
     /// The rest of this epoch's batches.
@@ -543,7 +628,8 @@ impl Loader {
                 let mut p = start;
                 while p < end && !stop2.load(Ordering::Relaxed) {
                     let q = (p + b).min(end);
-                    let got = batch::assemble(&shared, &order, p..q, cache.as_mut());
+                    let got = batch::assemble(&shared, &order, p..q, cache.as_mut())
+                        .map(|b| ((b.len > 0).then_some(b), q - p));
                     let failed = got.is_err();
                     if tx.send(got).is_err() || failed {
                         break;

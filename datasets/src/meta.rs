@@ -71,6 +71,27 @@ struct InfoJson {
     codebase_version: String,
     fps: f64,
     features: BTreeMap<String, Feature>,
+    #[serde(default)]
+    total_episodes: Option<usize>,
+    #[serde(default)]
+    total_frames: Option<usize>,
+    #[serde(default)]
+    data_path: Option<String>,
+    #[serde(default)]
+    video_path: Option<String>,
+}
+
+/// A path template of `info.json` must stay inside the dataset: relative, no `..`.
+fn check_template(key: &str, template: &str) -> std::result::Result<(), String> {
+    let inside = !template.starts_with('/')
+        && !template.contains('\\')
+        && template.split('/').all(|part| part != "..")
+        && !template.contains("://");
+    if inside {
+        Ok(())
+    } else {
+        Err(format!("{key} '{template}' points outside the dataset"))
+    }
 }
 
 /// The parts of `info.json` and `stats.json` the loader needs.
@@ -82,6 +103,8 @@ pub struct Meta {
     pub features: BTreeMap<String, Feature>,
     /// `stats.json`: feature → statistic (`min`, `max`, `mean`, `std`) → flattened values.
     pub stats: BTreeMap<String, BTreeMap<String, Vec<f64>>>,
+    /// `total_episodes` and `total_frames`, when given: what the data files must hold.
+    pub totals: Option<(usize, usize)>,
 }
 
 impl Meta {
@@ -100,6 +123,14 @@ impl Meta {
                 ),
             ));
         }
+        for (key, template) in [
+            ("data_path", &info.data_path),
+            ("video_path", &info.video_path),
+        ] {
+            if let Some(t) = template {
+                check_template(key, t).map_err(|e| Error::format(store.describe(info_rel), e))?;
+            }
+        }
         let stats_rel = "meta/stats.json";
         let stats = match store.read(stats_rel) {
             Ok(bytes) => {
@@ -110,10 +141,17 @@ impl Meta {
             }
             Err(e) => return Err(e),
         };
+        if !(info.fps.is_finite() && info.fps > 0.0) {
+            return Err(Error::format(
+                store.describe(info_rel),
+                format!("fps {} is not a positive rate", info.fps),
+            ));
+        }
         Ok(Meta {
             fps: info.fps,
             features: info.features,
             stats,
+            totals: info.total_episodes.zip(info.total_frames),
         })
     }
 
@@ -153,6 +191,9 @@ fn flatten(v: &serde_json::Value, out: &mut Vec<f64>) {
     match v {
         serde_json::Value::Array(a) => a.iter().for_each(|x| flatten(x, out)),
         serde_json::Value::Number(n) => out.extend(n.as_f64()),
+        // What NaN becomes in JSON: kept (as NaN) so the statistic is refused where it is used,
+        // not silently shortened.
+        serde_json::Value::Null => out.push(f64::NAN),
         _ => {}
     }
 }

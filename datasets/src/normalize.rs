@@ -58,6 +58,12 @@ impl Affine {
                     format!("{feature}/{name} has {} values, the feature {dim}", v.len()),
                 ));
             }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(Error::format(
+                    stats_file,
+                    format!("{feature}/{name}[{i}] is {}, not a finite number", v[i]),
+                ));
+            }
             Ok(v)
         };
         let (scale, offset) = match norm {

@@ -45,6 +45,7 @@ pub struct LoaderOptions {
     pub(crate) threads: usize,
     pub(crate) prefetch: usize,
     pub(crate) streaming: Option<usize>,
+    pub(crate) skip_bad_samples: usize,
 }
 
 impl Default for LoaderOptions {
@@ -74,6 +75,7 @@ impl Default for LoaderOptions {
             threads: 0,
             prefetch: 2,
             streaming: None,
+            skip_bad_samples: 0,
         }
     }
 }
@@ -195,6 +197,15 @@ impl LoaderOptions {
     /// samples drawn at random among them (default: random access over the whole split).
     pub fn streaming(mut self, buffer_episodes: usize) -> Self {
         self.streaming = Some(buffer_episodes);
+        self
+    }
+    /// Leave out of their batch (logged, counted by [`crate::Loader::skipped_samples`]) up to
+    /// `max` samples whose images cannot be read or decoded (a corrupt JPEG, a data file cut
+    /// short, an object store that keeps dropping the connection) instead of failing the batch;
+    /// the next one fails it. A batch with skipped samples is that much shorter. Default 0:
+    /// the first bad sample is an error.
+    pub fn skip_bad_samples(mut self, max: usize) -> Self {
+        self.skip_bad_samples = max;
         self
     }
     /// Opens the dataset at `location` (a directory or `s3://bucket/prefix`).

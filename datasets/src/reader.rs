@@ -79,7 +79,9 @@ impl Data {
             let file = store.file(rel, counter.clone())?;
             let name = file.name.clone();
             let bad = |e: &dyn std::fmt::Display| Error::format(name.clone(), e);
-            let options = ArrowReaderOptions::new().with_page_index(true);
+            // Read when the file has one (ours do; other writers may not).
+            let options = ArrowReaderOptions::new()
+                .with_page_index_policy(parquet::file::metadata::PageIndexPolicy::Optional);
             let meta = ArrowReaderMetadata::load(&file, options).map_err(|e| bad(&e))?;
             let mut rg_starts = vec![0usize];
             for rg in meta.metadata().row_groups() {

@@ -15,6 +15,11 @@ use parquet::file::reader::{ChunkReader, Length};
 
 use crate::error::{Error, Result};
 
+/// Retries of a failed object store request.
+const STORE_RETRIES: usize = 3;
+/// Longest time a request is retried for.
+const STORE_RETRY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// A dataset root.
 #[derive(Clone)]
 pub(crate) enum Store {
@@ -72,7 +77,17 @@ impl Store {
             return Ok(Store::Local(root));
         };
         let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
+        // Bounded: a connection that drops is retried a few times, then the read fails with the
+        // store's reason instead of stalling a training run (object_store's own default retries
+        // for up to three minutes). A request times out after 30 s, a connect after 5 s
+        // (object_store's defaults; `AWS_TIMEOUT`-style settings from the environment apply).
+        let retry = object_store::RetryConfig {
+            max_retries: STORE_RETRIES,
+            retry_timeout: STORE_RETRY_TIMEOUT,
+            ..Default::default()
+        };
         let store = object_store::aws::AmazonS3Builder::from_env()
+            .with_retry(retry)
             .with_bucket_name(bucket)
             .build()
             .map_err(|e| Error::Store {

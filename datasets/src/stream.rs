@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::loader::Shared;
 use crate::reader::ImageColumn;
 use crate::sampler::Sample;
@@ -58,10 +58,12 @@ impl Cache {
         }
     }
 
-    /// Reads (in parallel on the pool) the episodes of `samples` that are not open yet.
-    pub fn load(&mut self, shared: &Shared, samples: &[Sample]) -> Result<()> {
+    /// Reads (in parallel on the pool) the episodes of `samples` that are not open yet;
+    /// returns those that could not be read, with why (the first error instead, unless bad
+    /// samples may be skipped).
+    pub fn load(&mut self, shared: &Shared, samples: &[Sample]) -> Result<Vec<(u32, Error)>> {
         if shared.info.cameras.is_empty() {
-            return Ok(());
+            return Ok(Vec::new());
         }
         let mut missing: Vec<u32> = samples
             .iter()
@@ -81,12 +83,19 @@ impl Cache {
                 })
                 .collect()
         });
+        let mut unread = Vec::new();
         for (e, cols) in loaded {
-            self.open.insert(e, Arc::new(cols?));
-            self.resident += shared.episodes[e as usize].len;
+            match cols {
+                Ok(cols) => {
+                    self.open.insert(e, Arc::new(cols));
+                    self.resident += shared.episodes[e as usize].len;
+                }
+                Err(err) if shared.opts.skip_bad_samples == 0 => return Err(err),
+                Err(err) => unread.push((e, err)),
+            }
         }
         self.peak.fetch_max(self.resident, Ordering::Relaxed);
-        Ok(())
+        Ok(unread)
     }
 
     /// The open episodes' images.

@@ -2,13 +2,19 @@
 //! project's .venv — scripts/setup-python.sh installs it) opens as `s3://bucket/prefix` with the
 //! standard AWS_* variables and yields the same batches as the local copy, in random-access and
 //! streaming mode, reading only a sample's pages; a missing prefix is one line naming the URL.
+//! Behind a proxy that drops connections in the middle of a response, a read is retried, and
+//! an endpoint that keeps dropping them is one clear error (or skipped samples, counted) within
+//! seconds, never a hang.
 #![allow(clippy::unwrap_used)]
 
 mod common;
 
-use std::net::{SocketAddr, TcpStream};
+use std::io::{Read, Write};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use common::Fixture;
@@ -98,6 +104,62 @@ for d, _, files in os.walk(root):
     );
 }
 
+/// A TCP proxy in front of an endpoint that cuts connections: while `drops` is above zero,
+/// each response is cut after its first 200 bytes (a server or network that drops the
+/// connection mid-read), and `drops` counts down.
+struct Proxy {
+    endpoint: String,
+    drops: Arc<AtomicUsize>,
+}
+
+impl Proxy {
+    fn start(upstream: &str) -> Proxy {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let endpoint = format!("http://{}", listener.local_addr().unwrap());
+        let upstream = upstream.trim_start_matches("http://").to_string();
+        let drops = Arc::new(AtomicUsize::new(0));
+        let d = drops.clone();
+        std::thread::spawn(move || {
+            for client in listener.incoming() {
+                let Ok(client) = client else { return };
+                let Ok(server) = TcpStream::connect(&upstream) else {
+                    continue;
+                };
+                let (c2, s2) = (client.try_clone().unwrap(), server.try_clone().unwrap());
+                std::thread::spawn(move || pump(c2, s2, None));
+                let d = d.clone();
+                std::thread::spawn(move || pump(server, client, Some(d)));
+            }
+        });
+        Proxy { endpoint, drops }
+    }
+}
+
+/// Copies `from` to `to` until either closes; a response direction (`drops` given) is cut while
+/// drops are armed.
+fn pump(mut from: TcpStream, mut to: TcpStream, drops: Option<Arc<AtomicUsize>>) {
+    let mut buf = vec![0u8; 64 << 10];
+    loop {
+        let n = match from.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => n,
+        };
+        let cut = drops.as_ref().is_some_and(|d| {
+            d.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |k| k.checked_sub(1))
+                .is_ok()
+        });
+        if cut {
+            let _ = to.write_all(&buf[..n.min(200)]);
+            break;
+        }
+        if to.write_all(&buf[..n]).is_err() {
+            break;
+        }
+    }
+    let _ = from.shutdown(Shutdown::Both);
+    let _ = to.shutdown(Shutdown::Both);
+}
+
 fn epoch(o: LoaderOptions, location: &str) -> (Vec<Batch>, u64) {
     let mut l = o.open(location).unwrap();
     l.set_epoch(1);
@@ -160,5 +222,42 @@ fn s3_dataset_yields_the_same_batches_as_the_local_copy() {
             && !e.contains('\n'),
         "{e}"
     );
+
+    // Through a proxy that drops connections mid-response. (This test owns the variables.)
+    let proxy = Proxy::start(&moto.endpoint);
+    std::env::set_var("AWS_ENDPOINT_URL", &proxy.endpoint);
+    let (local, _) = epoch(opts.clone(), &ds.location());
+    // One dropped response: the read is retried and the epoch is the same.
+    let mut l = opts.clone().open(url).unwrap();
+    l.set_epoch(1);
+    proxy.drops.store(1, Ordering::Relaxed);
+    let got: Vec<Batch> = l.iter().map(Result::unwrap).collect();
+    assert!(got == local, "a retried read gives the same batches");
+    // Every response dropped: one clear error within seconds.
+    let mut l = opts.clone().open(url).unwrap();
+    l.set_epoch(1);
+    proxy.drops.store(usize::MAX, Ordering::Relaxed);
+    let t0 = Instant::now();
+    let e = l
+        .iter()
+        .find_map(Result::err)
+        .expect("an error")
+        .to_string();
+    let took = t0.elapsed();
+    assert!(
+        e.contains("s3://scaledp-test/sets/small/data/") && !e.contains('\n'),
+        "{e}"
+    );
+    assert!(took < Duration::from_secs(40), "failed after {took:?}");
+    // Skipped when allowed: the epoch ends, every sample counted as skipped.
+    proxy.drops.store(0, Ordering::Relaxed);
+    let few = opts.clone().max_episodes(1).skip_bad_samples(1000);
+    let mut l = few.open(url).unwrap();
+    proxy.drops.store(usize::MAX, Ordering::Relaxed);
+    let t0 = Instant::now();
+    let kept: usize = l.iter().map(|b| b.unwrap().len).sum();
+    assert_eq!(kept, 0);
+    assert_eq!(l.skipped_samples(), l.len() as u64);
+    assert!(t0.elapsed() < Duration::from_secs(60), "{:?}", t0.elapsed());
     drop(moto);
 }

@@ -176,7 +176,7 @@ fn properties(fx: &Fixture, batch: &RecordBatch) -> WriterProperties {
         .set_compression(Compression::SNAPPY)
         .set_data_page_size_limit(if fx.big_pages { 64 << 10 } else { 2 << 10 })
         .set_write_batch_size(if fx.big_pages { 8 } else { 1 })
-        .set_max_row_group_size(fx.row_group_rows.unwrap_or(1 << 20));
+        .set_max_row_group_row_count(Some(fx.row_group_rows.unwrap_or(1 << 20)));
     if !fx.page_index {
         b = b
             .set_statistics_enabled(EnabledStatistics::None)
