@@ -79,6 +79,22 @@ impl EpisodeOptions {
     ) -> Result<EpisodeWriter> {
         let partial = partial_path(path);
         let file = File::create(&partial).map_err(Error::io(&partial))?;
+        self.start_file(path, partial.clone(), file, topics, start_metadata)
+            .inspect_err(|_| {
+                // Not one chunk of it is readable (a full disk refuses even the header): no
+                // `.partial` is left for `recover` to trip over.
+                let _ = std::fs::remove_file(&partial);
+            })
+    }
+
+    fn start_file(
+        &self,
+        path: &Path,
+        partial: PathBuf,
+        file: File,
+        topics: &[TopicSpec],
+        start_metadata: BTreeMap<String, String>,
+    ) -> Result<EpisodeWriter> {
         let compression = match self.compression {
             Compression::None => None,
             Compression::Lz4 => Some(mcap::Compression::Lz4),
@@ -194,9 +210,21 @@ impl EpisodeWriter {
     }
 
     /// Closes the open chunk and hands it to the OS: a crash after this loses nothing before it.
+    /// Fails when the file was removed meanwhile (its directory deleted): writes would go on
+    /// into a file no one can open.
     pub fn flush(&mut self) -> Result<()> {
         let w = self.writer.as_mut().ok_or(Error::Stopped)?;
-        w.flush().map_err(Error::mcap(&self.partial))
+        w.flush().map_err(Error::mcap(&self.partial))?;
+        match std::fs::metadata(&self.partial) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(Error::Io {
+                path: self.partial.clone(),
+                source: std::io::Error::new(
+                    e.kind(),
+                    format!("removed while being written (is its directory gone?): {e}"),
+                ),
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// Writes `metadata` as the `scaledp.episode` record, the summary section and the end magic,

@@ -42,13 +42,33 @@ impl Error {
         let path = path.into();
         move |source| Self::Io { path, source }
     }
+    /// An MCAP writer error on `path`; an I/O failure is reported with the OS's reason ("No
+    /// space left on device"), which the mcap crate's own message leaves out.
     pub(crate) fn mcap(path: impl Into<PathBuf>) -> impl FnOnce(mcap::McapError) -> Self {
         let path = path.into();
-        move |e| Self::Mcap {
-            path,
-            reason: e.to_string(),
+        move |e| match e {
+            mcap::McapError::Io(source) => Self::Io { path, source },
+            e => Self::Mcap {
+                path,
+                reason: chain(&e),
+            },
         }
     }
+}
+
+/// An error's message followed by those of its sources, each once.
+pub(crate) fn chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        let m = s.to_string();
+        if !text.contains(&m) {
+            text.push_str(": ");
+            text.push_str(&m);
+        }
+        source = s.source();
+    }
+    text
 }
 
 /// Result with this crate's [`Error`].

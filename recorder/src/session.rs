@@ -103,6 +103,7 @@ impl RecorderOptions {
         let topics = self.rig.topics();
         let session = crate::net::open(config)?;
         let shared = Arc::new(Shared {
+            links: AtomicUsize::new(0),
             recording: AtomicBool::new(false),
             queued_bytes: AtomicUsize::new(0),
             max_queued_bytes: self.queue_bytes,
@@ -159,6 +160,7 @@ impl RecorderOptions {
             .name("scaledp-writer".into())
             .spawn(move || writer.run(rx))
             .map_err(Error::io("writer thread"))?;
+        let links = LinkWatch::start(session.clone(), shared.clone())?;
         Ok(Recorder {
             session,
             subscribers,
@@ -167,6 +169,7 @@ impl RecorderOptions {
             topics,
             events,
             writer: Some(handle),
+            links: Some(links),
         })
     }
 }
@@ -179,7 +182,59 @@ pub(crate) struct Counters {
     pub upstream_gaps: AtomicU64,
 }
 
+/// Watches the session's links (to the bridge, a router, peers) and says when the last one is
+/// lost and when one is back: Zenoh reconnects to its `connect` endpoints by itself, but what
+/// is published meanwhile never arrives, and an operator should know.
+struct LinkWatch {
+    stop: Arc<AtomicBool>,
+    handle: JoinHandle<()>,
+}
+
+impl LinkWatch {
+    /// How often the links are counted.
+    const EVERY: Duration = Duration::from_millis(250);
+
+    fn start(session: zenoh::Session, shared: Arc<Shared>) -> Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopped = stop.clone();
+        let handle = std::thread::Builder::new()
+            .name("scaledp-links".into())
+            .spawn(move || {
+                // None until the first link: a recorder started before the bridge is not "down".
+                let mut up: Option<bool> = None;
+                while !stopped.load(Relaxed) {
+                    let info = session.info();
+                    let n = info.routers_zid().wait().count() + info.peers_zid().wait().count();
+                    shared.links.store(n, Relaxed);
+                    match (up, n > 0) {
+                        (Some(true), false) => tracing::warn!(
+                            "zenoh: every link is down (bridge or router gone?): reconnecting; \
+                             messages published meanwhile are lost"
+                        ),
+                        (Some(false), true) => {
+                            tracing::warn!("zenoh: link back ({n} peers and routers)")
+                        }
+                        _ => {}
+                    }
+                    if up.is_some() || n > 0 {
+                        up = Some(n > 0);
+                    }
+                    std::thread::sleep(Self::EVERY);
+                }
+            })
+            .map_err(Error::io("link watch thread"))?;
+        Ok(Self { stop, handle })
+    }
+
+    fn stop(self) {
+        self.stop.store(true, Relaxed);
+        let _ = self.handle.join();
+    }
+}
+
 pub(crate) struct Shared {
+    /// Zenoh peers and routers linked to the session, as last counted.
+    pub links: AtomicUsize,
     pub recording: AtomicBool,
     pub queued_bytes: AtomicUsize,
     max_queued_bytes: usize,
@@ -349,9 +404,15 @@ pub struct Recorder {
     topics: Vec<TopicSpec>,
     events: Receiver<Event>,
     writer: Option<JoinHandle<()>>,
+    links: Option<LinkWatch>,
 }
 
 impl Recorder {
+    /// Zenoh peers and routers the session is linked to (counted every 250 ms): 0 while the
+    /// bridge or router is unreachable.
+    pub fn zenoh_links(&self) -> usize {
+        self.shared.links.load(Relaxed)
+    }
     /// A handle for sending commands from other threads.
     pub fn control(&self) -> Control {
         self.control.clone()
@@ -400,6 +461,9 @@ impl Recorder {
     }
 
     fn shutdown(&mut self) -> Result<()> {
+        if let Some(links) = self.links.take() {
+            links.stop();
+        }
         for s in self.subscribers.drain(..) {
             let _ = s.undeclare().wait();
         }

@@ -153,11 +153,16 @@ impl WriterThread {
             recorder_version: Some(env!("CARGO_PKG_VERSION").into()),
             ..EpisodeMetadata::default()
         };
-        match self
-            .opts
-            .episode
-            .create(&path, &self.topics, start_meta.start_record())
-        {
+        // The output directory is (re)created for every episode: one removed while the session
+        // runs costs the episode being written, not the ones after it.
+        let created = std::fs::create_dir_all(&self.opts.out_dir)
+            .map_err(Error::io(&self.opts.out_dir))
+            .and_then(|()| {
+                self.opts
+                    .episode
+                    .create(&path, &self.topics, start_meta.start_record())
+            });
+        match created {
             Ok(writer) => {
                 let partial = writer.partial_path().to_path_buf();
                 self.active = Some(Active {
@@ -224,10 +229,7 @@ impl WriterThread {
             end_time_ns: Some(end_ns),
             duration_s: Some(duration_s),
             label: Some(outcome),
-            message_counts: counts
-                .iter()
-                .map(|(t, n)| (t.to_string(), *n))
-                .collect(),
+            message_counts: counts.iter().map(|(t, n)| (t.to_string(), *n)).collect(),
             dropped: dropped.clone(),
             upstream_gaps: gaps.clone(),
             ..active.start_meta.clone()
@@ -274,9 +276,16 @@ impl WriterThread {
     }
 
     fn report_failure(&mut self, index: u64, e: Error) {
-        tracing::error!(
-            "episode {index}: {e} (its .partial file can be repaired with `scaledp recover`)"
-        );
+        let partial =
+            crate::episode::partial_path(&self.opts.out_dir.join(episode_file_name(index)));
+        if partial.exists() {
+            tracing::error!(
+                "episode {index}: {e} (its complete chunks are in {}: `scaledp recover` makes an MCAP of them)",
+                partial.display()
+            );
+        } else {
+            tracing::error!("episode {index}: {e}");
+        }
         self.publish_status(
             &serde_json::json!({"event": "failed", "episode": index, "error": e.to_string()}),
         );

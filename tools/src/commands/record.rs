@@ -19,6 +19,10 @@ pub struct Tally {
     pub finished: Vec<EpisodeReport>,
     /// Episodes that failed.
     pub failed: u64,
+    /// Episodes whose file was opened.
+    started: Vec<u64>,
+    /// An episode failed before its file could be opened (the output cannot be written).
+    unstartable: Option<u64>,
 }
 
 impl Tally {
@@ -59,7 +63,8 @@ fn drain(recorder: &Recorder, tally: &mut Tally, eol: &str) -> bool {
         super::view::live::update(recorder, Some(&ev));
         match ev {
             Event::Started { index, path } => {
-                tracing::debug!(index, path = %path.display(), "started")
+                tracing::debug!(index, path = %path.display(), "started");
+                tally.started.push(index);
             }
             Event::Finished(r) => {
                 print_finished(&r, eol);
@@ -69,6 +74,9 @@ fn drain(recorder: &Recorder, tally: &mut Tally, eol: &str) -> bool {
             Event::Failed { index, error } => {
                 eprint!("episode {index} failed: {error}{eol}");
                 tally.failed += 1;
+                if !tally.started.contains(&index) {
+                    tally.unstartable = Some(index);
+                }
                 ended = true;
             }
         }
@@ -118,22 +126,34 @@ pub fn timed_episodes(
     while episodes.is_none_or(|e| n < e) && !stop.load(Ordering::Relaxed) {
         recorder.send(Command::Start);
         let start = Instant::now();
+        // An episode that fails while being written (a full disk) is over: no stop to wait for.
+        let mut ended = false;
         while start.elapsed().as_secs_f64() < duration_s && !stop.load(Ordering::Relaxed) {
             std::thread::sleep(Duration::from_millis(100));
-            drain(recorder, &mut tally, "\n");
+            ended |= drain(recorder, &mut tally, "\n");
+            if ended {
+                break;
+            }
             if show {
                 eprint!("\r\x1b[2K{}", line.render(recorder.status()));
             }
         }
-        recorder.send(Command::Stop(outcome));
-        let deadline = Instant::now() + Duration::from_secs(60);
-        while !drain(recorder, &mut tally, "\n") && Instant::now() < deadline {
-            std::thread::sleep(Duration::from_millis(20));
+        if !ended {
+            recorder.send(Command::Stop(outcome));
+            let deadline = Instant::now() + Duration::from_secs(60);
+            while !drain(recorder, &mut tally, "\n") && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
         }
         if show {
             eprint!("\r\x1b[2K");
         }
         n += 1;
+        // An episode whose file cannot even be opened: the next would fail alike.
+        if let Some(index) = tally.unstartable {
+            eprintln!("stopping: episode {index} could not be written");
+            break;
+        }
     }
     tally
 }
