@@ -1,0 +1,85 @@
+//! Does a checkpoint fit a rig? Checked before anything moves, each mismatch one line naming
+//! the checkpoint's side and the rig's.
+
+use scaledp_policy::CheckpointConfig;
+use scaledp_schema::rig::{CommandType, Rig};
+
+use crate::error::{Error, Result};
+
+/// The camera of `rig` a checkpoint key (`observation.images.<name>`) refers to.
+pub fn camera_index(rig: &Rig, key: &str) -> Option<usize> {
+    let name = key.strip_prefix("observation.images.").unwrap_or(key);
+    rig.cameras.iter().position(|c| c.name == name)
+}
+
+/// Checks that `cfg` (a checkpoint's config, `ckpt` its name for messages) can drive `rig`:
+/// the rig it was trained for (when it names one), every camera it reads, its state and action
+/// names (the converter's `x, y, z, roll, pitch, yaw, gripper` per arm), and a `PoseStamped`
+/// command topic on every arm. Returns the rig camera index of each checkpoint camera.
+pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>> {
+    let bad = |m: String| Err(Error::Incompatible(m));
+    if let Some(trained) = &cfg.rig {
+        if trained != &rig.name {
+            return bad(format!(
+                "checkpoint {ckpt} was trained on rig {trained}, not {}: its cameras, arms and \
+                 frames belong to that rig (pass --rig {trained})",
+                rig.name
+            ));
+        }
+    }
+    let have: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
+    let mut cams = Vec::new();
+    for key in &cfg.model.cameras {
+        match camera_index(rig, key) {
+            Some(i) => cams.push(i),
+            None => {
+                return bad(format!(
+                    "checkpoint {ckpt} reads camera {key}, which rig {} lacks (it has {have:?})",
+                    rig.name
+                ))
+            }
+        }
+    }
+    let names = scaledp_converter::state_names(rig);
+    for (what, dim, got) in [
+        ("state", cfg.model.state_dim, &cfg.state_names),
+        ("action", cfg.model.action_dim, &cfg.action_names),
+    ] {
+        if dim != names.len() || (!got.is_empty() && got != &names) {
+            return bad(format!(
+                "checkpoint {ckpt} has a {dim}-D {what} {got:?}; rig {} with {} arm(s) needs \
+                 {} {names:?}",
+                rig.name,
+                rig.arms.len(),
+                names.len()
+            ));
+        }
+    }
+    for arm in &rig.arms {
+        if arm.command_topic.is_none() {
+            return bad(format!(
+                "rig {}: arm '{}' has no command_topic: nothing to send its TCP targets to",
+                rig.name, arm.name
+            ));
+        }
+        if arm.command_type.unwrap_or_default() != CommandType::PoseStamped {
+            return bad(format!(
+                "rig {}: arm '{}' takes joint-state commands; serve sends PoseStamped TCP targets",
+                rig.name, arm.name
+            ));
+        }
+    }
+    if !(cfg.fps.is_finite() && cfg.fps > 0.0) {
+        return bad(format!("checkpoint {ckpt}: control rate (fps) {}", cfg.fps));
+    }
+    if (cfg.fps - rig.control_rate_hz).abs() > 1e-6 {
+        tracing::warn!(
+            "checkpoint {ckpt} was trained at {} Hz, rig {} says {} Hz: acting at {} Hz",
+            cfg.fps,
+            rig.name,
+            rig.control_rate_hz,
+            cfg.fps
+        );
+    }
+    Ok(cams)
+}

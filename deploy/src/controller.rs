@@ -1,0 +1,532 @@
+//! The controller core, pure and clock-free: feed it stamped camera frames and joint states;
+//! at each control tick it builds the observation window exactly as `scaledp convert` built the
+//! training data ([`scaledp_converter::live`]: latest frame at or before the tick, interpolated
+//! joints, FK to the same TCP, the same resize and JPEG path, decoded as the loader decodes),
+//! asks for a chunk when the receding horizon needs one, and turns the chunk's action for the
+//! tick into clamped per-arm commands.
+//!
+//! Call order per tick: [`Controller::tick`] (maybe a [`Request`] to run the policy on),
+//! [`Controller::install`] when a chunk comes back (at once when acting synchronously, ticks
+//! later when inference overlaps execution), [`Controller::command`] for what to publish.
+//!
+//! Receding horizon: a chunk predicted from the window ending at tick k holds the actions of
+//! ticks k … k + C − 1; ticks k … k + `action_steps` − 1 are executed, and the next chunk is
+//! asked for at tick k + `action_steps` − `lead` (`lead` = expected inference latency in ticks,
+//! 0 when acting synchronously), so it arrives as the current one runs out. Actions for ticks
+//! already past when a chunk arrives are skipped.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use glam::{DMat4, DVec3};
+use scaledp_converter::live::{self, ArmKinematics, EncodeSpec};
+use scaledp_converter::Serialization;
+use scaledp_policy::{ActionChunk, CheckpointConfig, Observation};
+use scaledp_schema::kinematics::rotation_from_rpy;
+use scaledp_schema::msg::JointState;
+use scaledp_schema::rig::Gripper;
+use scaledp_schema::Rig;
+
+use crate::error::{Error, Result};
+use crate::safety::{clamp_pose, Clamped, Limits, Workspace};
+
+/// How the controller acts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlOptions {
+    /// Actions executed per chunk (diffusion_policy's action horizon), 1 … C.
+    pub action_steps: usize,
+    /// Workspace box per arm; `None`: [`Workspace::for_rig`].
+    pub workspace: Option<Vec<Workspace>>,
+    /// Largest TCP translation per tick (m).
+    pub max_step_m: f64,
+    /// Largest TCP rotation per tick (rad).
+    pub max_step_rad: f64,
+    /// A stream silent for more than this many of its periods stops the commands.
+    pub stale_periods: f64,
+    /// …but never for less than this (s): a 1 kHz arm's two periods are shorter than a busy
+    /// machine's scheduling jitter.
+    pub min_silence_s: f64,
+    /// The converter's frame freshness rule (`--stale-periods`, 1.5).
+    pub frame_stale_periods: f64,
+    /// The observation tick runs this far behind the receive clock (s), so that joints have a
+    /// sample after it and the tick's camera frames (tens of ms in flight) have arrived.
+    pub obs_lag_s: f64,
+    /// JPEG quality of the dataset's frames (the converter's default, 90).
+    pub jpeg_quality: u8,
+}
+
+impl Default for ControlOptions {
+    fn default() -> Self {
+        ControlOptions {
+            action_steps: 8,
+            workspace: None,
+            max_step_m: 0.05,
+            max_step_rad: 0.25,
+            stale_periods: 2.0,
+            min_silence_s: 0.05,
+            frame_stale_periods: 1.5,
+            obs_lag_s: 0.05,
+            jpeg_quality: 90,
+        }
+    }
+}
+
+/// Ask the policy for a chunk on this window; hand the chunk back to [`Controller::install`]
+/// with `index`.
+#[derive(Debug, Clone)]
+pub struct Request {
+    /// The tick the window ends at.
+    pub index: u64,
+    /// The window.
+    pub observation: Observation,
+}
+
+/// One control tick's bookkeeping.
+#[derive(Debug, Clone)]
+pub struct Tick {
+    /// Tick number since the start (or the last reset).
+    pub index: u64,
+    /// The observation instant (ns, stamp clock).
+    pub obs_ns: u64,
+    /// Why this tick has no observation (a stream is silent, a frame stale…).
+    pub halted: Option<String>,
+    /// A chunk to compute.
+    pub request: Option<Request>,
+}
+
+/// One arm's command.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    /// Arm index (rig order).
+    pub arm: usize,
+    /// TCP target, `base_from_tcp`, clamped.
+    pub base_from_tcp: DMat4,
+    /// Gripper opening (m), clamped; `None` for an arm without gripper.
+    pub gripper_width_m: Option<f64>,
+    /// What was clamped.
+    pub clamped: Clamped,
+}
+
+#[derive(Debug, Clone)]
+struct Series {
+    name: String,
+    period_s: f64,
+    stamps: VecDeque<u64>,
+    values: VecDeque<Vec<f64>>,
+    last_heard_ns: Option<u64>,
+}
+
+impl Series {
+    fn new(name: String, rate_hz: f64) -> Self {
+        Series {
+            name,
+            period_s: 1.0 / rate_hz,
+            stamps: VecDeque::new(),
+            values: VecDeque::new(),
+            last_heard_ns: None,
+        }
+    }
+    fn push(&mut self, stamp_ns: u64, recv_ns: u64, v: Vec<f64>) {
+        self.last_heard_ns = Some(recv_ns);
+        if self.stamps.back().is_some_and(|&s| s >= stamp_ns) {
+            return; // out of order or repeated: the converter keeps stamps ascending
+        }
+        self.stamps.push_back(stamp_ns);
+        self.values.push_back(v);
+        // Keep about one second, and never fewer than two samples.
+        let keep = ((1.0 / self.period_s).ceil() as usize).max(2) + 2;
+        while self.stamps.len() > keep {
+            self.stamps.pop_front();
+            self.values.pop_front();
+        }
+    }
+    fn at(&mut self, t_ns: u64) -> Option<Vec<f64>> {
+        let s = self.stamps.make_contiguous();
+        let v = self.values.make_contiguous();
+        live::joints_at(s, v, self.period_s, t_ns)
+    }
+    fn silence(&self, now_ns: u64, opts: &ControlOptions) -> Option<String> {
+        let limit = (opts.stale_periods * self.period_s).max(opts.min_silence_s);
+        match self.last_heard_ns {
+            None => Some(format!("waiting for {}", self.name)),
+            Some(t) if now_ns.saturating_sub(t) as f64 * 1e-9 > limit => Some(format!(
+                "{} silent for {:.0} ms (limit {:.0} ms)",
+                self.name,
+                now_ns.saturating_sub(t) as f64 * 1e-6,
+                limit * 1e3
+            )),
+            Some(_) => None,
+        }
+    }
+}
+
+/// The controller core; see the module documentation.
+#[derive(Debug)]
+pub struct Controller {
+    cfg: CheckpointConfig,
+    rig: Rig,
+    opts: ControlOptions,
+    limits: Limits,
+    /// Rig camera index of each checkpoint camera.
+    cams: Vec<usize>,
+    kin: Vec<ArmKinematics>,
+    grippers: Vec<Option<Gripper>>,
+    /// Per checkpoint camera: stamps (in `Series`, values unused) and messages.
+    frames: Vec<(Series, VecDeque<(String, Vec<u8>)>)>,
+    arms: Vec<Series>,
+    fingers: Vec<Option<Series>>,
+    period_ns: f64,
+    origin_ns: Option<u64>,
+    index: u64,
+    history: VecDeque<(Vec<u8>, Vec<f32>)>,
+    prev_pose: Vec<Option<[f64; 6]>>,
+    plan: BTreeMap<u64, Vec<f32>>,
+    pending: Option<u64>,
+    next_request: u64,
+    lead_ticks: u64,
+    last_command: Vec<Option<DMat4>>,
+    measured: Vec<DMat4>,
+    halted: Option<String>,
+}
+
+impl Controller {
+    /// A controller for checkpoint config `cfg` (named `ckpt` in messages) on `rig`; fails
+    /// with one line when they do not fit ([`crate::check`]).
+    pub fn new(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig, opts: ControlOptions) -> Result<Self> {
+        let cams = crate::check::check(cfg, ckpt, rig)?;
+        if opts.action_steps == 0 || opts.action_steps > cfg.model.action_chunk {
+            return Err(Error::Options(format!(
+                "--action-steps {}: between 1 and the checkpoint's chunk of {}",
+                opts.action_steps, cfg.model.action_chunk
+            )));
+        }
+        let workspace = opts
+            .workspace
+            .clone()
+            .unwrap_or_else(|| Workspace::for_rig(rig));
+        if workspace.len() != rig.arms.len() {
+            return Err(Error::Options(format!(
+                "{} workspace boxes for {} arms",
+                workspace.len(),
+                rig.arms.len()
+            )));
+        }
+        let kin = rig
+            .arms
+            .iter()
+            .map(|a| ArmKinematics::new(a).map_err(|e| Error::Incompatible(e.to_string())))
+            .collect::<Result<Vec<_>>>()?;
+        let frames = cams
+            .iter()
+            .map(|&i| {
+                let c = &rig.cameras[i];
+                (Series::new(format!("camera {} ({})", c.name, c.topic), c.fps), VecDeque::new())
+            })
+            .collect();
+        let arms = rig
+            .arms
+            .iter()
+            .map(|a| Series::new(format!("arm {} ({})", a.name, a.joint_state_topic), a.rate_hz))
+            .collect();
+        let fingers = rig
+            .arms
+            .iter()
+            .map(|a| {
+                a.gripper.as_ref().map(|g| {
+                    Series::new(format!("gripper of {} ({})", a.name, g.topic), g.rate_hz)
+                })
+            })
+            .collect();
+        let n = rig.arms.len();
+        Ok(Controller {
+            limits: Limits {
+                workspace,
+                max_step_m: opts.max_step_m,
+                max_step_rad: opts.max_step_rad,
+            },
+            cfg: cfg.clone(),
+            rig: rig.clone(),
+            cams,
+            kin,
+            grippers: rig.arms.iter().map(|a| a.gripper.clone()).collect(),
+            frames,
+            arms,
+            fingers,
+            period_ns: 1e9 / cfg.fps,
+            origin_ns: None,
+            index: 0,
+            history: VecDeque::new(),
+            prev_pose: vec![None; n],
+            plan: BTreeMap::new(),
+            pending: None,
+            next_request: 0,
+            lead_ticks: 0,
+            last_command: vec![None; n],
+            measured: vec![DMat4::IDENTITY; n],
+            halted: None,
+            opts,
+        })
+    }
+
+    /// The rig.
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    /// The limits in force.
+    pub fn limits(&self) -> &Limits {
+        &self.limits
+    }
+
+    /// The control period (ns): 1 / the checkpoint's fps.
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns.round() as u64
+    }
+
+    /// Rig camera index of each checkpoint camera, in the checkpoint's order.
+    pub fn cameras(&self) -> &[usize] {
+        &self.cams
+    }
+
+    /// Expected inference latency in ticks: the next chunk is asked for this many ticks before
+    /// the current one runs out (clamped below `action_steps`).
+    pub fn set_lead_ticks(&mut self, ticks: u64) {
+        self.lead_ticks = ticks.min(self.opts.action_steps as u64 - 1);
+    }
+
+    /// Forgets everything (a new episode): buffers, window, plan, the last commands.
+    pub fn reset(&mut self) {
+        for (s, m) in &mut self.frames {
+            *s = Series::new(s.name.clone(), 1.0 / s.period_s);
+            m.clear();
+        }
+        for s in self.arms.iter_mut().chain(self.fingers.iter_mut().flatten()) {
+            *s = Series::new(s.name.clone(), 1.0 / s.period_s);
+        }
+        self.origin_ns = None;
+        self.index = 0;
+        self.prev_pose.iter_mut().for_each(|p| *p = None);
+        self.last_command.iter_mut().for_each(|p| *p = None);
+        self.stop("reset");
+        self.halted = None;
+    }
+
+    /// A camera message (CDR `sensor_msgs/msg/Image` or `CompressedImage`) of rig camera
+    /// `camera`, captured at `stamp_ns`, received at `recv_ns`. Cameras the checkpoint does not
+    /// read are ignored.
+    pub fn on_image(&mut self, camera: usize, stamp_ns: u64, recv_ns: u64, message_type: &str, cdr: Vec<u8>) {
+        let Some(k) = self.cams.iter().position(|&c| c == camera) else {
+            return;
+        };
+        let (series, msgs) = &mut self.frames[k];
+        let before = series.stamps.len();
+        let newer = series.stamps.back().is_none_or(|&s| s < stamp_ns);
+        series.push(stamp_ns, recv_ns, Vec::new());
+        if newer {
+            msgs.push_back((message_type.to_string(), cdr));
+            let dropped = (before + 1).saturating_sub(series.stamps.len());
+            for _ in 0..dropped {
+                msgs.pop_front();
+            }
+        }
+    }
+
+    /// Joint positions of arm `arm` (rig joint order).
+    pub fn on_arm_joints(&mut self, arm: usize, stamp_ns: u64, recv_ns: u64, q: Vec<f64>) {
+        if let Some(s) = self.arms.get_mut(arm) {
+            s.push(stamp_ns, recv_ns, q);
+        }
+    }
+
+    /// Finger joint positions of arm `arm`'s gripper (its joint order).
+    pub fn on_gripper_joints(&mut self, arm: usize, stamp_ns: u64, recv_ns: u64, q: Vec<f64>) {
+        if let Some(Some(s)) = self.fingers.get_mut(arm) {
+            s.push(stamp_ns, recv_ns, q);
+        }
+    }
+
+    /// An arm's (`gripper` false) or gripper's `JointState`, joints mapped by name as the
+    /// converter maps them; a message lacking one of them is ignored.
+    pub fn on_joint_state(&mut self, arm: usize, gripper: bool, recv_ns: u64, js: &JointState) {
+        let names = match (gripper, self.rig.arms.get(arm)) {
+            (false, Some(a)) => &a.joint_names,
+            (true, Some(a)) => match &a.gripper {
+                Some(g) => &g.joint_names,
+                None => return,
+            },
+            _ => return,
+        };
+        let q: Option<Vec<f64>> = names
+            .iter()
+            .map(|n| js.name.iter().position(|x| x == n).and_then(|i| js.position.get(i).copied()))
+            .collect();
+        let Some(q) = q else { return };
+        let stamp = js.header.stamp.as_ns();
+        if gripper {
+            self.on_gripper_joints(arm, stamp, recv_ns, q);
+        } else {
+            self.on_arm_joints(arm, stamp, recv_ns, q);
+        }
+    }
+
+    fn stop(&mut self, why: &str) {
+        self.history.clear();
+        self.plan.clear();
+        self.pending = None;
+        self.next_request = 0;
+        self.halted = Some(why.to_string());
+    }
+
+    /// The next control tick, at `now_ns` on the receive clock; the observation instant is
+    /// `obs_lag_s` earlier. Ticks are counted: call once per control period.
+    pub fn tick(&mut self, now_ns: u64) -> Tick {
+        let index = self.index;
+        self.index += 1;
+        self.origin_ns.get_or_insert(now_ns);
+        let obs_ns = now_ns.saturating_sub((self.opts.obs_lag_s * 1e9) as u64);
+        let mut tick = Tick {
+            index,
+            obs_ns,
+            halted: None,
+            request: None,
+        };
+        match self.observe(now_ns, obs_ns) {
+            Ok(()) => self.halted = None,
+            Err(why) => {
+                self.stop(&why);
+                tick.halted = Some(why);
+                return tick;
+            }
+        }
+        self.plan.retain(|&k, _| k >= index);
+        let to = self.cfg.model.obs_horizon;
+        if self.pending.is_none() && index >= self.next_request && self.history.len() == to {
+            let mut observation = Observation::default();
+            for (img, state) in &self.history {
+                observation.images.extend_from_slice(img);
+                observation.state.extend_from_slice(state);
+            }
+            self.pending = Some(index);
+            tick.request = Some(Request { index, observation });
+        }
+        tick
+    }
+
+    /// Builds this tick's frames and state and pushes them onto the window.
+    fn observe(&mut self, now_ns: u64, obs_ns: u64) -> std::result::Result<(), String> {
+        let opts = self.opts.clone();
+        for s in self.frames.iter().map(|f| &f.0).chain(&self.arms).chain(self.fingers.iter().flatten()) {
+            if let Some(why) = s.silence(now_ns, &opts) {
+                return Err(why);
+            }
+        }
+        let m = &self.cfg.model;
+        let (w, h) = (m.image_width, m.image_height);
+        let spec = EncodeSpec {
+            width: w,
+            height: h,
+            quality: opts.jpeg_quality,
+        };
+        let per = 3 * w as usize * h as usize;
+        let mut images = vec![0u8; per * self.frames.len()];
+        for (k, (series, msgs)) in self.frames.iter_mut().enumerate() {
+            let stamps = series.stamps.make_contiguous();
+            let picked = live::frame_at(stamps, series.period_s, obs_ns, opts.frame_stale_periods);
+            let i = match picked {
+                Some((i, true)) => i,
+                _ => return Err(format!("{}: no frame within {} periods of the tick", series.name, opts.frame_stale_periods)),
+            };
+            let (ty, data) = &msgs[i];
+            let jpeg = live::encode_frame(ty, Serialization::Cdr, data, &spec)
+                .map_err(|e| format!("{}: {e}", series.name))?;
+            scaledp_datasets::decode_image(&jpeg, w, h, &mut images[k * per..(k + 1) * per])
+                .map_err(|e| format!("{}: {}", series.name, String::from(e)))?;
+        }
+        let mut state = Vec::with_capacity(7 * self.arms.len());
+        for a in 0..self.arms.len() {
+            let q = self.arms[a]
+                .at(obs_ns)
+                .ok_or_else(|| format!("{}: no samples around the tick", self.arms[a].name))?;
+            let base_from_tcp = self.kin[a].base_from_tcp(&q).map_err(|e| format!("{}: {e}", self.arms[a].name))?;
+            self.measured[a] = base_from_tcp;
+            let mut pose = scaledp_schema::kinematics::pose6_from_transform(base_from_tcp);
+            if let Some(prev) = self.prev_pose[a] {
+                for d in 3..6 {
+                    let mut pair = [prev[d], pose[d]];
+                    live::unwrap_angles(&mut pair);
+                    pose[d] = pair[1];
+                }
+            }
+            self.prev_pose[a] = Some(pose);
+            let width = match (&mut self.fingers[a], &self.grippers[a]) {
+                (Some(s), Some(g)) => {
+                    let f = s.at(obs_ns).ok_or_else(|| format!("{}: no samples around the tick", s.name))?;
+                    g.model.width_m(&f)
+                }
+                _ => 0.0,
+            };
+            state.extend(pose.iter().map(|&v| v as f32));
+            state.push(width as f32);
+        }
+        self.history.push_back((images, state));
+        while self.history.len() > self.cfg.model.obs_horizon {
+            self.history.pop_front();
+        }
+        Ok(())
+    }
+
+    /// A chunk computed for the window of tick `index`: its first `action_steps` actions
+    /// become the plan of ticks `index …`. A chunk nobody asked for (after a stop) is dropped.
+    pub fn install(&mut self, index: u64, chunk: &ActionChunk) {
+        if self.pending != Some(index) {
+            return;
+        }
+        self.pending = None;
+        let steps = self.opts.action_steps.min(chunk.chunk);
+        for k in 0..steps {
+            self.plan.insert(index + k as u64, chunk.step(k).to_vec());
+        }
+        self.next_request = index + (steps as u64).saturating_sub(self.lead_ticks).max(1);
+    }
+
+    /// The commands for the current tick (the one [`Controller::tick`] last returned), or why
+    /// there are none.
+    pub fn command(&mut self) -> std::result::Result<Vec<Command>, String> {
+        if let Some(why) = &self.halted {
+            return Err(why.clone());
+        }
+        let index = self.index.saturating_sub(1);
+        let Some(action) = self.plan.get(&index).cloned() else {
+            return Err(if self.history.len() < self.cfg.model.obs_horizon {
+                "filling the observation window".into()
+            } else {
+                "waiting for the policy".into()
+            });
+        };
+        if let Some(k) = action.iter().position(|v| !v.is_finite()) {
+            self.stop("non-finite action");
+            return Err(format!("the policy's action value {k} is {}", action[k]));
+        }
+        let mut out = Vec::with_capacity(self.arms.len());
+        for a in 0..self.arms.len() {
+            let v: Vec<f64> = action[7 * a..7 * a + 7].iter().map(|&x| f64::from(x)).collect();
+            let target = DMat4::from_translation(DVec3::new(v[0], v[1], v[2]))
+                * DMat4::from_mat3(rotation_from_rpy([v[3], v[4], v[5]]));
+            let previous = self.last_command[a].unwrap_or(self.measured[a]);
+            let mut clamped = Clamped::default();
+            let pose = clamp_pose(target, previous, &self.limits.workspace[a], &self.limits, &mut clamped);
+            let gripper_width_m = self.grippers[a].as_ref().map(|g| {
+                let max = g.model.max_width_m();
+                clamped.gripper |= !(0.0..=max).contains(&v[6]);
+                v[6].clamp(0.0, max)
+            });
+            self.last_command[a] = Some(pose);
+            out.push(Command {
+                arm: a,
+                base_from_tcp: pose,
+                gripper_width_m,
+                clamped,
+            });
+        }
+        Ok(out)
+    }
+}

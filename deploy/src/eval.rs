@@ -1,0 +1,286 @@
+//! `scaledp eval`: seeded episodes of the simulated task in simulated time. The world is
+//! stepped event by event (camera captures at each camera's fps, joint samples at each arm's
+//! and gripper's rate, control ticks at the checkpoint's fps), the cameras rendered and wrapped
+//! in the messages the live simulator publishes, and the same [`Controller`] called
+//! synchronously: inference takes no simulated time, so a run is deterministic and as fast as
+//! the CPU allows, whatever the model's latency.
+//!
+//! Seeds: episode i uses seed `seed + i`. `scaledp collect` records episode i with seed
+//! `--seed + i` (default 0, so 100 demonstrations use seeds 0–99); eval's default first seed is
+//! [`HELD_OUT_SEED`], far from any collection run's, so evaluation scenes are never training
+//! scenes.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use scaledp_policy::Policy;
+use scaledp_schema::{Rig, RosMessage};
+use scaledp_sim::render::{render, View};
+use scaledp_sim::{messages, ArmCommand, Scene, World};
+use serde::Serialize;
+
+use crate::controller::{ControlOptions, Controller};
+use crate::error::{Error, Result};
+use crate::stats::{percentile, wilson_interval};
+
+/// Eval's default first seed: collect's seeds start at 0.
+pub const HELD_OUT_SEED: u64 = 1_000_000;
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct EvalOptions {
+    /// Episodes.
+    pub episodes: u64,
+    /// First seed (episode i: seed + i).
+    pub seed: u64,
+    /// Longest episode (simulated s).
+    pub max_seconds: f64,
+    /// An episode ends early once the task has been a success for this long (s).
+    pub settle_s: f64,
+    /// The controller's settings.
+    pub control: ControlOptions,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            episodes: 50,
+            seed: HELD_OUT_SEED,
+            max_seconds: 30.0,
+            settle_s: 1.0,
+            control: ControlOptions::default(),
+        }
+    }
+}
+
+/// One episode's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct EpisodeReport {
+    /// The episode's seed.
+    pub seed: u64,
+    /// Every cube resting within 3 cm of its target at the end.
+    pub success: bool,
+    /// When the task last became a success (simulated s), if it ended as one.
+    pub time_to_success_s: Option<f64>,
+    /// Simulated length (s).
+    pub duration_s: f64,
+    /// Horizontal distance of each cube to its target at the end (m).
+    pub cube_distance_m: Vec<f64>,
+    /// Chunks predicted.
+    pub chunks: u64,
+    /// Ticks with commands.
+    pub commanded_ticks: u64,
+    /// Ticks with a clamped command.
+    pub clamped_ticks: u64,
+    /// Ticks without an observation (stale or missing streams).
+    pub halted_ticks: u64,
+    /// Wall-clock time of the episode (s).
+    pub wall_s: f64,
+}
+
+/// The run's report (`--report` JSON).
+#[derive(Debug, Clone, Serialize)]
+pub struct EvalReport {
+    /// The checkpoint directory.
+    pub checkpoint: String,
+    /// The rig.
+    pub rig: String,
+    /// `simulated-time`: inference takes no simulated time.
+    pub mode: String,
+    /// First seed.
+    pub seed: u64,
+    /// Actions executed per chunk.
+    pub action_steps: usize,
+    /// Control rate (Hz).
+    pub control_rate_hz: f64,
+    /// Per episode.
+    pub episodes: Vec<EpisodeReport>,
+    /// Successes.
+    pub successes: u64,
+    /// Successes / episodes.
+    pub success_rate: f64,
+    /// 95 % Wilson score interval of the success rate.
+    pub wilson_95: [f64; 2],
+    /// Mean time to success over the successes (s).
+    pub mean_time_to_success_s: Option<f64>,
+    /// Inference latency per chunk, median (ms, wall clock).
+    pub inference_ms_p50: Option<f64>,
+    /// Inference latency per chunk, 99th percentile (ms).
+    pub inference_ms_p99: Option<f64>,
+    /// Wall-clock time of the whole run (s).
+    pub wall_s: f64,
+}
+
+impl EvalReport {
+    /// Writes the report as pretty JSON.
+    pub fn write(&self, path: &std::path::Path) -> Result<()> {
+        let io = |source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let json = serde_json::to_vec_pretty(self).map_err(|e| io(e.into()))?;
+        std::fs::write(path, json).map_err(io)
+    }
+}
+
+/// A stream of the simulated rig: what it is and when it next samples.
+enum Source {
+    Camera { rig_index: usize, view: View },
+    Arm(usize),
+    Gripper(usize),
+}
+
+/// Runs `opts.episodes` episodes of `policy` on `rig`'s simulated task; `on_episode` sees each
+/// outcome as it comes.
+pub fn run_eval(
+    policy: &Policy,
+    rig: &Rig,
+    opts: &EvalOptions,
+    on_episode: &mut dyn FnMut(&EpisodeReport),
+) -> Result<EvalReport> {
+    let ckpt = policy.dir().display().to_string();
+    let mut ctl = Controller::new(policy.config(), &ckpt, rig, opts.control.clone())?;
+    if !(opts.max_seconds > 0.0 && opts.max_seconds.is_finite()) {
+        return Err(Error::Options(format!("--max-seconds {}", opts.max_seconds)));
+    }
+    let scene = Arc::new(Scene::new(rig));
+    let started = Instant::now();
+    let mut latencies_ms = Vec::new();
+    let mut episodes = Vec::new();
+    for i in 0..opts.episodes {
+        let seed = opts.seed + i;
+        let ep = episode(policy, rig, &scene, &mut ctl, seed, opts, &mut latencies_ms)?;
+        on_episode(&ep);
+        episodes.push(ep);
+    }
+    let n = episodes.len() as u64;
+    let successes = episodes.iter().filter(|e| e.success).count() as u64;
+    let times: Vec<f64> = episodes.iter().filter_map(|e| e.time_to_success_s).collect();
+    let (lo, hi) = wilson_interval(successes, n);
+    Ok(EvalReport {
+        checkpoint: ckpt,
+        rig: rig.name.clone(),
+        mode: "simulated-time".into(),
+        seed: opts.seed,
+        action_steps: opts.control.action_steps,
+        control_rate_hz: policy.config().fps,
+        successes,
+        success_rate: successes as f64 / n.max(1) as f64,
+        wilson_95: [lo, hi],
+        mean_time_to_success_s: (!times.is_empty())
+            .then(|| times.iter().sum::<f64>() / times.len() as f64),
+        inference_ms_p50: percentile(&latencies_ms, 0.5),
+        inference_ms_p99: percentile(&latencies_ms, 0.99),
+        wall_s: started.elapsed().as_secs_f64(),
+        episodes,
+    })
+}
+
+fn episode(
+    policy: &Policy,
+    rig: &Rig,
+    scene: &Arc<Scene>,
+    ctl: &mut Controller,
+    seed: u64,
+    opts: &EvalOptions,
+    latencies_ms: &mut Vec<f64>,
+) -> Result<EpisodeReport> {
+    let wall = Instant::now();
+    let mut world = World::with_scene(scene.clone(), seed);
+    ctl.reset();
+    let mut sources: Vec<(Source, u64, u64)> = Vec::new(); // (source, period ns, next ns)
+    let period = |hz: f64| (1e9 / hz).round().max(1.0) as u64;
+    for &c in ctl.cameras() {
+        let cam = &rig.cameras[c];
+        let view = View::for_camera(scene, cam, c);
+        sources.push((Source::Camera { rig_index: c, view }, period(cam.fps), 0));
+    }
+    for (a, arm) in rig.arms.iter().enumerate() {
+        sources.push((Source::Arm(a), period(arm.rate_hz), 0));
+        if let Some(g) = &arm.gripper {
+            sources.push((Source::Gripper(a), period(g.rate_hz), 0));
+        }
+    }
+    let tick_period = ctl.period_ns();
+    let mut next_tick = tick_period;
+    let end_ns = (opts.max_seconds * 1e9) as u64;
+    let mut pixels = Vec::new();
+    let mut rep = EpisodeReport {
+        seed,
+        success: false,
+        time_to_success_s: None,
+        duration_s: 0.0,
+        cube_distance_m: Vec::new(),
+        chunks: 0,
+        commanded_ticks: 0,
+        clamped_ticks: 0,
+        halted_ticks: 0,
+        wall_s: 0.0,
+    };
+    loop {
+        let next_sample = sources.iter().map(|s| s.2).min().unwrap_or(u64::MAX);
+        let t = next_sample.min(next_tick);
+        if t > end_ns {
+            break;
+        }
+        world.step(t.saturating_sub(world.time_ns()) as f64 * 1e-9, &[]);
+        for (src, per, next) in sources.iter_mut().filter(|s| s.2 == t) {
+            *next += *per;
+            match src {
+                Source::Camera { rig_index, view } => {
+                    let cam = &rig.cameras[*rig_index];
+                    render(scene, view, &world.state(), cam.encoding(), &mut pixels);
+                    let msg = messages::image(cam, pixels.clone(), t);
+                    ctl.on_image(*rig_index, t, t, "sensor_msgs/msg/Image", msg.to_cdr());
+                }
+                Source::Arm(a) => ctl.on_arm_joints(*a, t, t, world.arm_state(*a).q),
+                Source::Gripper(a) => {
+                    let s = world.arm_state(*a);
+                    if let Some(g) = &rig.arms[*a].gripper {
+                        let q = g.model.positions_for_width(s.gripper_width_m, g.joint_names.len());
+                        ctl.on_gripper_joints(*a, t, t, q);
+                    }
+                }
+            }
+        }
+        if t == next_tick {
+            next_tick += tick_period;
+            let tick = ctl.tick(t);
+            if tick.halted.is_some() {
+                rep.halted_ticks += 1;
+            }
+            if let Some(req) = tick.request {
+                let started = Instant::now();
+                let chunk = policy.predict(&req.observation, seed.wrapping_mul(1_000_003) ^ req.index)?;
+                latencies_ms.push(started.elapsed().as_secs_f64() * 1e3);
+                rep.chunks += 1;
+                ctl.install(req.index, &chunk);
+            }
+            if let Ok(cmds) = ctl.command() {
+                rep.commanded_ticks += 1;
+                rep.clamped_ticks += u64::from(cmds.iter().any(|c| c.clamped.any()));
+                let arm_cmds: Vec<ArmCommand> = cmds
+                    .iter()
+                    .map(|c| ArmCommand {
+                        pose: Some(c.base_from_tcp),
+                        gripper_width_m: c.gripper_width_m,
+                    })
+                    .collect();
+                world.step(0.0, &arm_cmds);
+            }
+            let task = world.task_state();
+            if let Some(ts) = task.time_to_success_s {
+                if task.success && world.time_s() - ts >= opts.settle_s {
+                    break;
+                }
+            }
+        }
+    }
+    let task = world.task_state();
+    rep.success = task.success;
+    rep.time_to_success_s = task.success.then_some(task.time_to_success_s).flatten();
+    rep.duration_s = world.time_s();
+    rep.cube_distance_m = task.cubes.iter().map(|c| c.distance_m).collect();
+    rep.wall_s = wall.elapsed().as_secs_f64();
+    Ok(rep)
+}

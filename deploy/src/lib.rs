@@ -1,0 +1,29 @@
+//! Closing the loop: a trained ScaleDP checkpoint driving a rig, and its success rate measured.
+//!
+//! - [`Controller`] is the pure, clock-free core: stamped frames and joint states in, at each
+//!   control tick the observation window built exactly as `scaledp convert` built the training
+//!   data, a receding-horizon plan of the policy's chunks, and per-arm commands out (a TCP
+//!   target in the base frame and a gripper opening), clamped to a workspace box and a maximum
+//!   step per tick ([`safety`]); a stream silent for more than two periods stops the commands.
+//! - [`serve`] runs the core on Zenoh (zenoh-bridge-ros2dds or rmw_zenoh keys, as the recorder
+//!   and the simulator use them) with inference on its own thread, overlapping execution.
+//! - [`eval`] runs seeded episodes of the simulated task in simulated time — the world stepped,
+//!   the cameras rendered and the same core called synchronously — and reports the success
+//!   rate with its 95 % Wilson interval ([`stats`]).
+//! - [`check`] refuses, in one line and before anything moves, a checkpoint for another rig or
+//!   a rig lacking the checkpoint's cameras or dimensions.
+
+pub mod check;
+pub mod controller;
+mod error;
+pub mod eval;
+pub mod safety;
+pub mod serve;
+pub mod stats;
+
+pub use controller::{Command, ControlOptions, Controller, Request, Tick};
+pub use error::{Error, Result};
+pub use eval::{run_eval, EpisodeReport, EvalOptions, EvalReport};
+pub use safety::{Limits, Workspace};
+pub use serve::{ServeOptions, Server, Status};
+pub use stats::{percentile, wilson_interval};
