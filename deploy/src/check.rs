@@ -12,14 +12,37 @@ pub fn camera_index(rig: &Rig, key: &str) -> Option<usize> {
     rig.cameras.iter().position(|c| c.name == name)
 }
 
+/// The rig a checkpoint was trained on: its config's `rig` holds the dataset's rig, as the
+/// rig's TOML (what `scaledp convert` stores) or as a name.
+pub fn trained_rig(cfg: &CheckpointConfig) -> Option<std::result::Result<Rig, String>> {
+    let text = cfg.rig.as_deref()?.trim();
+    if text.is_empty() {
+        return None;
+    }
+    if text.contains('\n') || text.contains('=') {
+        return Some(
+            Rig::parse(text, std::path::Path::new("checkpoint config.json")).map_err(|e| e.to_string()),
+        );
+    }
+    Some(Err(text.to_string()))
+}
+
+/// The name of the rig a checkpoint was trained on, if it says.
+pub fn trained_rig_name(cfg: &CheckpointConfig) -> Option<String> {
+    trained_rig(cfg).map(|r| match r {
+        Ok(rig) => rig.name,
+        Err(name) => name,
+    })
+}
+
 /// Checks that `cfg` (a checkpoint's config, `ckpt` its name for messages) can drive `rig`:
 /// the rig it was trained for (when it names one), every camera it reads, its state and action
 /// names (the converter's `x, y, z, roll, pitch, yaw, gripper` per arm), and a `PoseStamped`
 /// command topic on every arm. Returns the rig camera index of each checkpoint camera.
 pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>> {
     let bad = |m: String| Err(Error::Incompatible(m));
-    if let Some(trained) = &cfg.rig {
-        if trained != &rig.name {
+    if let Some(trained) = trained_rig_name(cfg) {
+        if trained != rig.name {
             return bad(format!(
                 "checkpoint {ckpt} was trained on rig {trained}, not {}: its cameras, arms and \
                  frames belong to that rig (pass --rig {trained})",

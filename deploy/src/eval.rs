@@ -123,6 +123,27 @@ impl EvalReport {
     }
 }
 
+/// The seeds a collection manifest (`collect.jsonl` of `scaledp collect`, one JSON object with a
+/// `seed` per line) used.
+pub fn collected_seeds(path: &std::path::Path) -> Result<std::collections::HashSet<u64>> {
+    let bad = |m: String| Error::Options(format!("{}: {m}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, l)| {
+            let v: serde_json::Value =
+                serde_json::from_str(l).map_err(|e| bad(format!("line {}: {e}", i + 1)))?;
+            v["seed"]
+                .as_u64()
+                .ok_or_else(|| bad(format!("line {} has no seed", i + 1)))
+        })
+        .collect()
+}
+
 /// A stream of the simulated rig: what it is and when it next samples.
 enum Source {
     Camera { rig_index: usize, view: View },

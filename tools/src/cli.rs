@@ -74,6 +74,12 @@ pub enum Command {
     Train(crate::commands::train::TrainArgs),
     /// Run a checkpoint over a recorded episode: predicted vs recorded actions and their error.
     Predict(crate::commands::predict::PredictArgs),
+    /// Drive a rig with a checkpoint over Zenoh: observations built as the converter built the
+    /// training data, clamped Cartesian commands at the control rate (--dry-run prints them).
+    Serve(crate::commands::serve::ServeArgs),
+    /// A checkpoint's success rate on seeded, held-out episodes of the simulated task (95 %
+    /// Wilson interval, per-episode outcomes, a JSON report).
+    Eval(crate::commands::eval::EvalArgs),
     /// The whole path on a simulated rig: records a few short episodes over loopback, converts
     /// them into a LeRobot dataset and runs one epoch of the training-data loader.
     Demo(DemoArgs),

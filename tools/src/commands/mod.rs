@@ -3,9 +3,11 @@
 mod collect;
 mod convert;
 mod demo;
+pub(crate) mod eval;
 pub(crate) mod predict;
 mod record;
 mod recover;
+pub(crate) mod serve;
 mod sim;
 pub(crate) mod train;
 mod view;
@@ -30,6 +32,8 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
         Command::Bench(cmd) => scaledp_bench::run(cmd).map(ExitStatus::from),
         Command::Train(args) => train::run(args),
         Command::Predict(args) => predict::run(args),
+        Command::Serve(args) => serve::run(args),
+        Command::Eval(args) => eval::run(args),
         Command::Demo(args) => demo::run(args),
         Command::View(args) => view::run(args),
     }

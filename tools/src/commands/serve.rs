@@ -1,0 +1,177 @@
+//! `scaledp serve`: a checkpoint driving a rig over Zenoh (see `scaledp_deploy::serve`).
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use scaledp_deploy::{Command, ControlOptions, ServeOptions, Server, Workspace};
+use scaledp_policy::Policy;
+use scaledp_schema::Rig;
+
+use crate::cli::{ExitStatus, KeysArg, NetArgs};
+
+/// The controller settings `serve` and `eval` share.
+#[derive(Debug, Clone, Args)]
+pub struct ControlArgs {
+    /// Actions executed per predicted chunk (receding horizon), 1 … the checkpoint's chunk.
+    #[arg(long, default_value_t = 8)]
+    pub action_steps: usize,
+    /// Workspace box of the TCP targets in the arm's base frame, xmin,ymin,zmin,xmax,ymax,zmax
+    /// (m): once for every arm, or once per arm in rig order (default: the simulated cell's
+    /// work region of each arm, 12 cm wider, from 5 mm to 45 cm above the table).
+    #[arg(long, value_name = "BOX")]
+    pub workspace: Vec<String>,
+    /// Largest TCP translation per control tick (m).
+    #[arg(long, default_value_t = 0.05)]
+    pub max_step_m: f64,
+    /// Largest TCP rotation per control tick (rad).
+    #[arg(long, default_value_t = 0.25)]
+    pub max_step_rad: f64,
+    /// How far the observation tick runs behind the clock (ms), so joints have a sample after
+    /// it and the tick's camera frames have arrived.
+    #[arg(long, default_value_t = 50.0)]
+    pub obs_lag_ms: f64,
+    /// cpu, or cuda (a build with the `cuda` feature of scaledp-policy).
+    #[arg(long, default_value = "cpu")]
+    pub device: String,
+}
+
+impl ControlArgs {
+    /// The controller options for `rig`.
+    pub fn options(&self, rig: &Rig) -> Result<ControlOptions> {
+        let boxes = self
+            .workspace
+            .iter()
+            .map(|w| {
+                Workspace::parse(w).with_context(|| {
+                    format!("--workspace {w}: six numbers xmin,ymin,zmin,xmax,ymax,zmax, min ≤ max")
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let workspace = match boxes.len() {
+            0 => None,
+            1 => Some(vec![boxes[0]; rig.arms.len()]),
+            n if n == rig.arms.len() => Some(boxes),
+            n => bail!("{n} --workspace boxes for the {} arms of rig {}", rig.arms.len(), rig.name),
+        };
+        Ok(ControlOptions {
+            action_steps: self.action_steps,
+            workspace,
+            max_step_m: self.max_step_m,
+            max_step_rad: self.max_step_rad,
+            obs_lag_s: self.obs_lag_ms * 1e-3,
+            ..ControlOptions::default()
+        })
+    }
+}
+
+/// `scaledp serve`.
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// A checkpoint directory, or a run directory (its latest checkpoint).
+    pub checkpoint: PathBuf,
+    /// Rig file or shipped rig name (default: the rig the checkpoint was trained on).
+    #[arg(long)]
+    pub rig: Option<String>,
+    /// Key layout of the rig's topics.
+    #[arg(long, value_enum, default_value = "bridge")]
+    pub keys: KeysArg,
+    /// Bridge namespace prefix for the keys.
+    #[arg(long, default_value = "")]
+    pub namespace: String,
+    /// Publish nothing; print each tick's commands instead.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Key of the JSON status (inference latency, command rate, why it holds).
+    #[arg(long, default_value = "scaledp/serve/status")]
+    pub status_key: String,
+    /// Stop after this many seconds (default: until Ctrl-C).
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+    /// Seed of the sampling noise.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub control: ControlArgs,
+    /// Network settings; by default it connects to tcp/127.0.0.1:7447 (the bridge, or `scaledp sim`).
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+/// The rig named, else the checkpoint's own (the rig stored with its training data).
+pub fn rig_for(policy: &Policy, rig: Option<&str>) -> Result<Rig> {
+    if let Some(r) = rig {
+        return Ok(Rig::load_or_builtin(r)?);
+    }
+    match scaledp_deploy::check::trained_rig(policy.config()) {
+        Some(Ok(rig)) => Ok(rig),
+        Some(Err(name)) => Ok(Rig::load_or_builtin(&name)?),
+        None => bail!("checkpoint {} names no rig: pass --rig", policy.dir().display()),
+    }
+}
+
+fn describe(tick: u64, cmds: &[Command], rig: &Rig) -> String {
+    let mut s = format!("tick {tick}:");
+    for c in cmds {
+        let p = scaledp_schema::kinematics::pose6_from_transform(c.base_from_tcp);
+        s.push_str(&format!(
+            " {} xyz ({:.3}, {:.3}, {:.3}) rpy ({:.3}, {:.3}, {:.3})",
+            rig.arms[c.arm].name, p[0], p[1], p[2], p[3], p[4], p[5]
+        ));
+        if let Some(w) = c.gripper_width_m {
+            s.push_str(&format!(" gripper {w:.3} m"));
+        }
+        if c.clamped.any() {
+            s.push_str(&format!(" [clamped {:?}]", c.clamped));
+        }
+    }
+    s
+}
+
+/// Runs `scaledp serve`.
+pub fn run(a: ServeArgs) -> Result<ExitStatus> {
+    let dev = super::train::device(&a.control.device)?;
+    let policy = Policy::load(&a.checkpoint, &dev)?;
+    let rig = rig_for(&policy, a.rig.as_deref())?;
+    let mut opts = ServeOptions::new(rig.clone());
+    opts.keys = match a.keys {
+        KeysArg::Bridge => scaledp_sim::KeyStyle::Bridge,
+        KeysArg::Rmw => scaledp_sim::KeyStyle::Rmw,
+    };
+    opts.namespace = a.namespace.clone();
+    opts.control = a.control.options(&rig)?;
+    opts.dry_run = a.dry_run;
+    opts.status_key = a.status_key.clone();
+    opts.seed = a.seed;
+    if a.dry_run {
+        let r = rig.clone();
+        opts.on_commands = Some(Arc::new(move |tick, cmds| println!("{}", describe(tick, cmds, &r))));
+    }
+    // The checkpoint is checked against the rig before the session opens.
+    let ckpt = policy.dir().display().to_string();
+    scaledp_deploy::check::check(policy.config(), &ckpt, &rig)?;
+    let session = scaledp_recorder::net::open(super::zenoh_config(&a.net, &[])?)?;
+    let server = Server::start(policy, opts, &session)?;
+    eprintln!(
+        "serving {ckpt} on rig {} at {} Hz{}",
+        rig.name,
+        rig.control_rate_hz,
+        if a.dry_run { " (dry run: nothing is published)" } else { "" }
+    );
+    let stop = super::interrupt_flag();
+    let started = Instant::now();
+    let mut last = Instant::now();
+    while !stop.load(Ordering::Relaxed) && a.duration.is_none_or(|d| started.elapsed().as_secs_f64() < d) {
+        std::thread::sleep(Duration::from_millis(50));
+        if last.elapsed() >= Duration::from_secs(1) {
+            last = Instant::now();
+            eprintln!("{}", server.status().line());
+        }
+    }
+    let st = server.stop();
+    eprintln!("stopped: {}", st.line());
+    Ok(ExitStatus::Success)
+}
