@@ -21,7 +21,8 @@ pub fn trained_rig(cfg: &CheckpointConfig) -> Option<std::result::Result<Rig, St
     }
     if text.contains('\n') || text.contains('=') {
         return Some(
-            Rig::parse(text, std::path::Path::new("checkpoint config.json")).map_err(|e| e.to_string()),
+            Rig::parse(text, std::path::Path::new("checkpoint config.json"))
+                .map_err(|e| e.to_string()),
         );
     }
     Some(Err(text.to_string()))

@@ -27,48 +27,9 @@ use scaledp_schema::rig::Gripper;
 use scaledp_schema::Rig;
 
 use crate::error::{Error, Result};
+pub use crate::options::ControlOptions;
 use crate::safety::{clamp_pose, Clamped, Limits, Workspace};
-
-/// How the controller acts.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ControlOptions {
-    /// Actions executed per chunk (diffusion_policy's action horizon), 1 … C.
-    pub action_steps: usize,
-    /// Workspace box per arm; `None`: [`Workspace::for_rig`].
-    pub workspace: Option<Vec<Workspace>>,
-    /// Largest TCP translation per tick (m).
-    pub max_step_m: f64,
-    /// Largest TCP rotation per tick (rad).
-    pub max_step_rad: f64,
-    /// A stream silent for more than this many of its periods stops the commands.
-    pub stale_periods: f64,
-    /// …but never for less than this (s): a 1 kHz arm's two periods are shorter than a busy
-    /// machine's scheduling jitter.
-    pub min_silence_s: f64,
-    /// The converter's frame freshness rule (`--stale-periods`, 1.5).
-    pub frame_stale_periods: f64,
-    /// The observation tick runs this far behind the receive clock (s), so that joints have a
-    /// sample after it and the tick's camera frames (tens of ms in flight) have arrived.
-    pub obs_lag_s: f64,
-    /// JPEG quality of the dataset's frames (the converter's default, 90).
-    pub jpeg_quality: u8,
-}
-
-impl Default for ControlOptions {
-    fn default() -> Self {
-        ControlOptions {
-            action_steps: 8,
-            workspace: None,
-            max_step_m: 0.05,
-            max_step_rad: 0.25,
-            stale_periods: 2.0,
-            min_silence_s: 0.05,
-            frame_stale_periods: 1.5,
-            obs_lag_s: 0.05,
-            jpeg_quality: 90,
-        }
-    }
-}
+use crate::streams::Series;
 
 /// Ask the policy for a chunk on this window; hand the chunk back to [`Controller::install`]
 /// with `index`.
@@ -106,58 +67,8 @@ pub struct Command {
     pub clamped: Clamped,
 }
 
-#[derive(Debug, Clone)]
-struct Series {
-    name: String,
-    period_s: f64,
-    stamps: VecDeque<u64>,
-    values: VecDeque<Vec<f64>>,
-    last_heard_ns: Option<u64>,
-}
-
-impl Series {
-    fn new(name: String, rate_hz: f64) -> Self {
-        Series {
-            name,
-            period_s: 1.0 / rate_hz,
-            stamps: VecDeque::new(),
-            values: VecDeque::new(),
-            last_heard_ns: None,
-        }
-    }
-    fn push(&mut self, stamp_ns: u64, recv_ns: u64, v: Vec<f64>) {
-        self.last_heard_ns = Some(recv_ns);
-        if self.stamps.back().is_some_and(|&s| s >= stamp_ns) {
-            return; // out of order or repeated: the converter keeps stamps ascending
-        }
-        self.stamps.push_back(stamp_ns);
-        self.values.push_back(v);
-        // Keep about one second, and never fewer than two samples.
-        let keep = ((1.0 / self.period_s).ceil() as usize).max(2) + 2;
-        while self.stamps.len() > keep {
-            self.stamps.pop_front();
-            self.values.pop_front();
-        }
-    }
-    fn at(&mut self, t_ns: u64) -> Option<Vec<f64>> {
-        let s = self.stamps.make_contiguous();
-        let v = self.values.make_contiguous();
-        live::joints_at(s, v, self.period_s, t_ns)
-    }
-    fn silence(&self, now_ns: u64, opts: &ControlOptions) -> Option<String> {
-        let limit = (opts.stale_periods * self.period_s).max(opts.min_silence_s);
-        match self.last_heard_ns {
-            None => Some(format!("waiting for {}", self.name)),
-            Some(t) if now_ns.saturating_sub(t) as f64 * 1e-9 > limit => Some(format!(
-                "{} silent for {:.0} ms (limit {:.0} ms)",
-                self.name,
-                now_ns.saturating_sub(t) as f64 * 1e-6,
-                limit * 1e3
-            )),
-            Some(_) => None,
-        }
-    }
-}
+/// A camera's buffered messages (type, CDR bytes), parallel to its stamps.
+type Frames = VecDeque<(String, Vec<u8>)>;
 
 /// The controller core; see the module documentation.
 #[derive(Debug)]
@@ -171,7 +82,7 @@ pub struct Controller {
     kin: Vec<ArmKinematics>,
     grippers: Vec<Option<Gripper>>,
     /// Per checkpoint camera: stamps (in `Series`, values unused) and messages.
-    frames: Vec<(Series, VecDeque<(String, Vec<u8>)>)>,
+    frames: Vec<(Series, Frames)>,
     arms: Vec<Series>,
     fingers: Vec<Option<Series>>,
     period_ns: f64,
@@ -191,7 +102,12 @@ pub struct Controller {
 impl Controller {
     /// A controller for checkpoint config `cfg` (named `ckpt` in messages) on `rig`; fails
     /// with one line when they do not fit ([`crate::check`]).
-    pub fn new(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig, opts: ControlOptions) -> Result<Self> {
+    pub fn new(
+        cfg: &CheckpointConfig,
+        ckpt: &str,
+        rig: &Rig,
+        opts: ControlOptions,
+    ) -> Result<Self> {
         let cams = crate::check::check(cfg, ckpt, rig)?;
         if opts.action_steps == 0 || opts.action_steps > cfg.model.action_chunk {
             return Err(Error::Options(format!(
@@ -219,21 +135,29 @@ impl Controller {
             .iter()
             .map(|&i| {
                 let c = &rig.cameras[i];
-                (Series::new(format!("camera {} ({})", c.name, c.topic), c.fps), VecDeque::new())
+                (
+                    Series::new(format!("camera {} ({})", c.name, c.topic), c.fps),
+                    VecDeque::new(),
+                )
             })
             .collect();
         let arms = rig
             .arms
             .iter()
-            .map(|a| Series::new(format!("arm {} ({})", a.name, a.joint_state_topic), a.rate_hz))
+            .map(|a| {
+                Series::new(
+                    format!("arm {} ({})", a.name, a.joint_state_topic),
+                    a.rate_hz,
+                )
+            })
             .collect();
         let fingers = rig
             .arms
             .iter()
             .map(|a| {
-                a.gripper.as_ref().map(|g| {
-                    Series::new(format!("gripper of {} ({})", a.name, g.topic), g.rate_hz)
-                })
+                a.gripper
+                    .as_ref()
+                    .map(|g| Series::new(format!("gripper of {} ({})", a.name, g.topic), g.rate_hz))
             })
             .collect();
         let n = rig.arms.len();
@@ -287,6 +211,11 @@ impl Controller {
         &self.cams
     }
 
+    /// When the newest camera frame was received (receive clock), if any.
+    pub fn newest_frame_ns(&self) -> Option<u64> {
+        self.frames.iter().filter_map(|f| f.0.last_heard_ns).max()
+    }
+
     /// Expected inference latency in ticks: the next chunk is asked for this many ticks before
     /// the current one runs out (clamped below `action_steps`).
     pub fn set_lead_ticks(&mut self, ticks: u64) {
@@ -299,7 +228,11 @@ impl Controller {
             *s = Series::new(s.name.clone(), 1.0 / s.period_s);
             m.clear();
         }
-        for s in self.arms.iter_mut().chain(self.fingers.iter_mut().flatten()) {
+        for s in self
+            .arms
+            .iter_mut()
+            .chain(self.fingers.iter_mut().flatten())
+        {
             *s = Series::new(s.name.clone(), 1.0 / s.period_s);
         }
         self.origin_ns = None;
@@ -313,7 +246,14 @@ impl Controller {
     /// A camera message (CDR `sensor_msgs/msg/Image` or `CompressedImage`) of rig camera
     /// `camera`, captured at `stamp_ns`, received at `recv_ns`. Cameras the checkpoint does not
     /// read are ignored.
-    pub fn on_image(&mut self, camera: usize, stamp_ns: u64, recv_ns: u64, message_type: &str, cdr: Vec<u8>) {
+    pub fn on_image(
+        &mut self,
+        camera: usize,
+        stamp_ns: u64,
+        recv_ns: u64,
+        message_type: &str,
+        cdr: Vec<u8>,
+    ) {
         let Some(k) = self.cams.iter().position(|&c| c == camera) else {
             return;
         };
@@ -357,7 +297,12 @@ impl Controller {
         };
         let q: Option<Vec<f64>> = names
             .iter()
-            .map(|n| js.name.iter().position(|x| x == n).and_then(|i| js.position.get(i).copied()))
+            .map(|n| {
+                js.name
+                    .iter()
+                    .position(|x| x == n)
+                    .and_then(|i| js.position.get(i).copied())
+            })
             .collect();
         let Some(q) = q else { return };
         let stamp = js.header.stamp.as_ns();
@@ -414,7 +359,13 @@ impl Controller {
     /// Builds this tick's frames and state and pushes them onto the window.
     fn observe(&mut self, now_ns: u64, obs_ns: u64) -> std::result::Result<(), String> {
         let opts = self.opts.clone();
-        for s in self.frames.iter().map(|f| &f.0).chain(&self.arms).chain(self.fingers.iter().flatten()) {
+        for s in self
+            .frames
+            .iter()
+            .map(|f| &f.0)
+            .chain(&self.arms)
+            .chain(self.fingers.iter().flatten())
+        {
             if let Some(why) = s.silence(now_ns, &opts) {
                 return Err(why);
             }
@@ -433,7 +384,12 @@ impl Controller {
             let picked = live::frame_at(stamps, series.period_s, obs_ns, opts.frame_stale_periods);
             let i = match picked {
                 Some((i, true)) => i,
-                _ => return Err(format!("{}: no frame within {} periods of the tick", series.name, opts.frame_stale_periods)),
+                _ => {
+                    return Err(format!(
+                        "{}: no frame within {} periods of the tick",
+                        series.name, opts.frame_stale_periods
+                    ))
+                }
             };
             let (ty, data) = &msgs[i];
             let jpeg = live::encode_frame(ty, Serialization::Cdr, data, &spec)
@@ -446,7 +402,9 @@ impl Controller {
             let q = self.arms[a]
                 .at(obs_ns)
                 .ok_or_else(|| format!("{}: no samples around the tick", self.arms[a].name))?;
-            let base_from_tcp = self.kin[a].base_from_tcp(&q).map_err(|e| format!("{}: {e}", self.arms[a].name))?;
+            let base_from_tcp = self.kin[a]
+                .base_from_tcp(&q)
+                .map_err(|e| format!("{}: {e}", self.arms[a].name))?;
             self.measured[a] = base_from_tcp;
             let mut pose = scaledp_schema::kinematics::pose6_from_transform(base_from_tcp);
             if let Some(prev) = self.prev_pose[a] {
@@ -459,7 +417,9 @@ impl Controller {
             self.prev_pose[a] = Some(pose);
             let width = match (&mut self.fingers[a], &self.grippers[a]) {
                 (Some(s), Some(g)) => {
-                    let f = s.at(obs_ns).ok_or_else(|| format!("{}: no samples around the tick", s.name))?;
+                    let f = s
+                        .at(obs_ns)
+                        .ok_or_else(|| format!("{}: no samples around the tick", s.name))?;
                     g.model.width_m(&f)
                 }
                 _ => 0.0,
@@ -508,12 +468,21 @@ impl Controller {
         }
         let mut out = Vec::with_capacity(self.arms.len());
         for a in 0..self.arms.len() {
-            let v: Vec<f64> = action[7 * a..7 * a + 7].iter().map(|&x| f64::from(x)).collect();
+            let v: Vec<f64> = action[7 * a..7 * a + 7]
+                .iter()
+                .map(|&x| f64::from(x))
+                .collect();
             let target = DMat4::from_translation(DVec3::new(v[0], v[1], v[2]))
                 * DMat4::from_mat3(rotation_from_rpy([v[3], v[4], v[5]]));
             let previous = self.last_command[a].unwrap_or(self.measured[a]);
             let mut clamped = Clamped::default();
-            let pose = clamp_pose(target, previous, &self.limits.workspace[a], &self.limits, &mut clamped);
+            let pose = clamp_pose(
+                target,
+                previous,
+                &self.limits.workspace[a],
+                &self.limits,
+                &mut clamped,
+            );
             let gripper_width_m = self.grippers[a].as_ref().map(|g| {
                 let max = g.model.max_width_m();
                 clamped.gripper |= !(0.0..=max).contains(&v[6]);

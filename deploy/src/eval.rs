@@ -162,7 +162,10 @@ pub fn run_eval(
     let ckpt = policy.dir().display().to_string();
     let mut ctl = Controller::new(policy.config(), &ckpt, rig, opts.control.clone())?;
     if !(opts.max_seconds > 0.0 && opts.max_seconds.is_finite()) {
-        return Err(Error::Options(format!("--max-seconds {}", opts.max_seconds)));
+        return Err(Error::Options(format!(
+            "--max-seconds {}",
+            opts.max_seconds
+        )));
     }
     let scene = Arc::new(Scene::new(rig));
     let started = Instant::now();
@@ -176,7 +179,10 @@ pub fn run_eval(
     }
     let n = episodes.len() as u64;
     let successes = episodes.iter().filter(|e| e.success).count() as u64;
-    let times: Vec<f64> = episodes.iter().filter_map(|e| e.time_to_success_s).collect();
+    let times: Vec<f64> = episodes
+        .iter()
+        .filter_map(|e| e.time_to_success_s)
+        .collect();
     let (lo, hi) = wilson_interval(successes, n);
     Ok(EvalReport {
         checkpoint: ckpt,
@@ -258,7 +264,9 @@ fn episode(
                 Source::Gripper(a) => {
                     let s = world.arm_state(*a);
                     if let Some(g) = &rig.arms[*a].gripper {
-                        let q = g.model.positions_for_width(s.gripper_width_m, g.joint_names.len());
+                        let q = g
+                            .model
+                            .positions_for_width(s.gripper_width_m, g.joint_names.len());
                         ctl.on_gripper_joints(*a, t, t, q);
                     }
                 }
@@ -272,7 +280,8 @@ fn episode(
             }
             if let Some(req) = tick.request {
                 let started = Instant::now();
-                let chunk = policy.predict(&req.observation, seed.wrapping_mul(1_000_003) ^ req.index)?;
+                let chunk =
+                    policy.predict(&req.observation, seed.wrapping_mul(1_000_003) ^ req.index)?;
                 latencies_ms.push(started.elapsed().as_secs_f64() * 1e3);
                 rep.chunks += 1;
                 ctl.install(req.index, &chunk);

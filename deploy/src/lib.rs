@@ -17,9 +17,11 @@ pub mod check;
 pub mod controller;
 mod error;
 pub mod eval;
+mod options;
 pub mod safety;
 pub mod serve;
 pub mod stats;
+mod streams;
 
 pub use controller::{Command, ControlOptions, Controller, Request, Tick};
 pub use error::{Error, Result};

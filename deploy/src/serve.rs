@@ -93,6 +93,11 @@ pub struct Status {
     pub inference_ms_p50: Option<f64>,
     /// See `inference_ms_p50`.
     pub inference_ms_p99: Option<f64>,
+    /// End-to-end latency (ms): from the newest camera frame received when a window was taken
+    /// to the first command published from that window's chunk; median and 99th percentile.
+    pub e2e_ms_p50: Option<f64>,
+    /// See `e2e_ms_p50`.
+    pub e2e_ms_p99: Option<f64>,
     /// Why the last tick had no command, if it had none.
     pub holding: Option<String>,
     /// Nothing is published.
@@ -104,10 +109,11 @@ impl Status {
     pub fn line(&self) -> String {
         let ms = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.0}"));
         format!(
-            "{:.1} cmd/s, inference p50 {} ms p99 {} ms, {} chunks, {} ticks ({} clamped, {} halted){}{}",
+            "{:.1} cmd/s, inference p50 {} ms p99 {} ms, frame→command p50 {} ms, {} chunks, {} ticks ({} clamped, {} halted){}{}",
             self.command_rate_hz,
             ms(self.inference_ms_p50),
             ms(self.inference_ms_p99),
+            ms(self.e2e_ms_p50),
             self.chunks,
             self.ticks,
             self.clamped_ticks,
@@ -137,7 +143,10 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 struct Outputs {
     /// Per arm: pose publisher and key type, gripper publisher.
-    arms: Vec<(Option<zenoh::pubsub::Publisher<'static>>, Option<zenoh::pubsub::Publisher<'static>>)>,
+    arms: Vec<(
+        Option<zenoh::pubsub::Publisher<'static>>,
+        Option<zenoh::pubsub::Publisher<'static>>,
+    )>,
     rmw: bool,
     seq: i64,
     status: zenoh::pubsub::Publisher<'static>,
@@ -162,7 +171,11 @@ impl Server {
         let mut subscribers = Vec::new();
         for &c in ctl.cameras() {
             let cam = &rig.cameras[c];
-            let (k, ty, tx) = (sub_key(&cam.topic, cam.message_type()), cam.message_type(), tx.clone());
+            let (k, ty, tx) = (
+                sub_key(&cam.topic, cam.message_type()),
+                cam.message_type(),
+                tx.clone(),
+            );
             let compressed = ty.ends_with("CompressedImage");
             let sub = session
                 .declare_subscriber(k.clone())
@@ -201,7 +214,10 @@ impl Server {
             }
         }
         let declare = |k: String| -> Result<zenoh::pubsub::Publisher<'static>> {
-            session.declare_publisher(k.clone()).wait().map_err(|e| Error::zenoh(&k, e))
+            session
+                .declare_publisher(k.clone())
+                .wait()
+                .map_err(|e| Error::zenoh(&k, e))
         };
         let mut arms = Vec::new();
         for arm in &rig.arms {
@@ -312,6 +328,10 @@ fn control_loop(
     let mut next = Instant::now() + period;
     let mut latencies: VecDeque<f64> = VecDeque::new();
     let mut commanded: VecDeque<Instant> = VecDeque::new();
+    // Receive time of the newest frame behind each request, and of the chunk just installed.
+    let mut frame_of_request: VecDeque<(u64, u64)> = VecDeque::new();
+    let mut fresh_chunk: Option<u64> = None;
+    let mut e2e: VecDeque<f64> = VecDeque::new();
     let started = Instant::now();
     let mut last_status = Instant::now();
     let mut st = Status {
@@ -339,6 +359,13 @@ fn control_loop(
         }
         for (index, chunk, ms) in res_rx.try_iter() {
             ctl.install(index, &chunk);
+            while let Some(&(i, frame_ns)) = frame_of_request.front() {
+                frame_of_request.pop_front();
+                if i == index {
+                    fresh_chunk = Some(frame_ns);
+                    break;
+                }
+            }
             st.chunks += 1;
             latencies.push_back(ms);
             if latencies.len() > 200 {
@@ -354,6 +381,9 @@ fn control_loop(
         st.ticks += 1;
         st.halted_ticks += u64::from(tick.halted.is_some());
         if let Some(req) = tick.request {
+            if let Some(f) = ctl.newest_frame_ns() {
+                frame_of_request.push_back((req.index, f));
+            }
             let _ = req_tx.send(req);
         }
         match ctl.command() {
@@ -363,13 +393,25 @@ fn control_loop(
                 st.clamped_ticks += u64::from(cmds.iter().any(|c| c.clamped.any()));
                 commanded.push_back(now);
                 publish(&ctl, &mut out, &cmds);
+                if let Some(f) = fresh_chunk.take() {
+                    e2e.push_back(now_ns().saturating_sub(f) as f64 * 1e-6);
+                    if e2e.len() > 200 {
+                        e2e.pop_front();
+                    }
+                    let v: Vec<f64> = e2e.iter().copied().collect();
+                    st.e2e_ms_p50 = percentile(&v, 0.5);
+                    st.e2e_ms_p99 = percentile(&v, 0.99);
+                }
                 if let Some(h) = &hook {
                     h(tick.index, &cmds);
                 }
             }
             Err(why) => st.holding = Some(why),
         }
-        while commanded.front().is_some_and(|t| now.duration_since(*t) > Duration::from_secs(2)) {
+        while commanded
+            .front()
+            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(2))
+        {
             commanded.pop_front();
         }
         let window = started.elapsed().as_secs_f64().clamp(1e-3, 2.0);
@@ -412,7 +454,10 @@ fn publish(ctl: &Controller, out: &mut Outputs, cmds: &[Command]) {
             }
         };
         if let Some(p) = pose_pub {
-            put(p, messages::pose_command(arm, &c.base_from_tcp, stamp).to_cdr());
+            put(
+                p,
+                messages::pose_command(arm, &c.base_from_tcp, stamp).to_cdr(),
+            );
         }
         if let (Some(p), Some(g), Some(w)) = (grip_pub, &arm.gripper, c.gripper_width_m) {
             put(p, messages::gripper_command(g, w, stamp).to_cdr());

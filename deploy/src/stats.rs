@@ -32,7 +32,10 @@ mod tests {
     fn wilson_intervals_match_the_textbook() {
         // 80 of 100: 71.1–86.7 %; 100 of 100: 96.3–100 %.
         let (lo, hi) = wilson_interval(80, 100);
-        assert!((lo - 0.7112).abs() < 1e-3 && (hi - 0.8666).abs() < 1e-3, "{lo} {hi}");
+        assert!(
+            (lo - 0.7112).abs() < 1e-3 && (hi - 0.8666).abs() < 1e-3,
+            "{lo} {hi}"
+        );
         let (lo, hi) = wilson_interval(100, 100);
         assert!((lo - 0.9630).abs() < 1e-3 && hi == 1.0, "{lo} {hi}");
         assert_eq!(wilson_interval(0, 0), (0.0, 1.0));

@@ -34,9 +34,15 @@ fn eval_reports_two_short_episodes_the_same_way_twice() {
         // A policy that holds the rest pose never places the cube.
         assert_eq!(e["success"], false);
         assert!(e["time_to_success_s"].is_null());
-        assert!((e["duration_s"].as_f64().unwrap() - 2.0).abs() < 1e-6, "{e}");
+        assert!(
+            (e["duration_s"].as_f64().unwrap() - 2.0).abs() < 1e-6,
+            "{e}"
+        );
         // 20 ticks at 10 Hz: a command from the second tick on, a chunk every 8 ticks.
-        let (ticks, chunks) = (e["commanded_ticks"].as_u64().unwrap(), e["chunks"].as_u64().unwrap());
+        let (ticks, chunks) = (
+            e["commanded_ticks"].as_u64().unwrap(),
+            e["chunks"].as_u64().unwrap(),
+        );
         assert!((18..=20).contains(&ticks), "{e}");
         assert!((3..=4).contains(&chunks), "{e}");
         assert_eq!(e["halted_ticks"], 0);
@@ -50,7 +56,9 @@ fn eval_reports_two_short_episodes_the_same_way_twice() {
     assert_eq!(w[0].as_f64().unwrap(), 0.0);
     assert!((w[1].as_f64().unwrap() - 0.6576).abs() < 1e-3, "{w:?}");
     assert!(json["inference_ms_p50"].as_f64().unwrap() > 0.0);
-    assert!(json["inference_ms_p99"].as_f64().unwrap() >= json["inference_ms_p50"].as_f64().unwrap());
+    assert!(
+        json["inference_ms_p99"].as_f64().unwrap() >= json["inference_ms_p50"].as_f64().unwrap()
+    );
     // Simulated time: the same seeds give the same episodes.
     let again = run_eval(&policy, &rig, &opts, &mut |_| {}).unwrap();
     for (a, b) in report.episodes.iter().zip(&again.episodes) {

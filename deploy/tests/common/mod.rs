@@ -74,7 +74,13 @@ impl Spec {
 pub fn write(root: &Path, spec: &Spec) -> PathBuf {
     let dir = root.join("ckpt");
     std::fs::create_dir_all(&dir).unwrap();
-    let mut model = ModelConfig::new(ModelSize::Ti, spec.cameras.clone(), (24, 24), spec.dim, spec.dim);
+    let mut model = ModelConfig::new(
+        ModelSize::Ti,
+        spec.cameras.clone(),
+        (24, 24),
+        spec.dim,
+        spec.dim,
+    );
     model.size = None;
     model.depth = 1;
     model.hidden = 32;
@@ -88,7 +94,9 @@ pub fn write(root: &Path, spec: &Spec) -> PathBuf {
         .save(&dir.join("model.safetensors"))
         .unwrap();
     let names: Vec<String> = if spec.dim == 7 {
-        ["x", "y", "z", "roll", "pitch", "yaw", "gripper"].map(String::from).to_vec()
+        ["x", "y", "z", "roll", "pitch", "yaw", "gripper"]
+            .map(String::from)
+            .to_vec()
     } else {
         (0..spec.dim).map(|i| format!("d{i}")).collect()
     };
@@ -118,6 +126,10 @@ pub fn write(root: &Path, spec: &Spec) -> PathBuf {
         loader: None,
         train: serde_json::Value::Null,
     };
-    std::fs::write(dir.join("config.json"), serde_json::to_vec_pretty(&cfg).unwrap()).unwrap();
+    std::fs::write(
+        dir.join("config.json"),
+        serde_json::to_vec_pretty(&cfg).unwrap(),
+    )
+    .unwrap();
     dir
 }

@@ -52,17 +52,8 @@ impl Tally {
     }
 }
 
-/// The 95 % Wilson score interval of `k` successes in `n` trials.
-pub fn wilson_interval(k: u64, n: u64) -> (f64, f64) {
-    if n == 0 {
-        return (0.0, 1.0);
-    }
-    let (k, n, z) = (k as f64, n as f64, 1.959_964);
-    let p = k / n;
-    let centre = (p + z * z / (2.0 * n)) / (1.0 + z * z / n);
-    let half = z / (1.0 + z * z / n) * (p * (1.0 - p) / n + z * z / (4.0 * n * n)).sqrt();
-    ((centre - half).max(0.0), (centre + half).min(1.0))
-}
+/// The 95 % Wilson score interval (one definition, shared with `scaledp eval`).
+pub use scaledp_deploy::wilson_interval;
 
 /// The task in words, for a rig with `arms` arms.
 fn default_task(arms: usize) -> &'static str {

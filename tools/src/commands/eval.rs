@@ -66,8 +66,10 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         control: a.control.options(&rig)?,
     };
     let bar = ProgressBar::new(a.episodes).with_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes, eta {eta} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes, eta {eta} {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let mut ok = 0u64;
     let report = run_eval(&policy, &rig, &opts, &mut |e| {
@@ -76,7 +78,11 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
             Some(t) if e.success => format!("success at {t:.1} s"),
             _ => format!(
                 "failure (cube {} m from its target)",
-                e.cube_distance_m.iter().map(|d| format!("{d:.3}")).collect::<Vec<_>>().join(", ")
+                e.cube_distance_m
+                    .iter()
+                    .map(|d| format!("{d:.3}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
         };
         let line = format!(
@@ -89,9 +95,10 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
     })?;
     bar.finish_and_clear();
     let path = a.report.clone().unwrap_or_else(|| {
-        policy
-            .dir()
-            .join(format!("eval-{}-seed{}-n{}.json", rig.name, a.seed, a.episodes))
+        policy.dir().join(format!(
+            "eval-{}-seed{}-n{}.json",
+            rig.name, a.seed, a.episodes
+        ))
     });
     report.write(&path)?;
     let ms = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.0}"));
@@ -107,7 +114,9 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         report.success_rate * 100.0,
         lo * 100.0,
         hi * 100.0,
-        report.mean_time_to_success_s.map_or("–".into(), |t| format!("{t:.1} s")),
+        report
+            .mean_time_to_success_s
+            .map_or("–".into(), |t| format!("{t:.1} s")),
         ms(report.inference_ms_p50),
         ms(report.inference_ms_p99),
         report.wall_s,

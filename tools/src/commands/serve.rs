@@ -55,7 +55,11 @@ impl ControlArgs {
             0 => None,
             1 => Some(vec![boxes[0]; rig.arms.len()]),
             n if n == rig.arms.len() => Some(boxes),
-            n => bail!("{n} --workspace boxes for the {} arms of rig {}", rig.arms.len(), rig.name),
+            n => bail!(
+                "{n} --workspace boxes for the {} arms of rig {}",
+                rig.arms.len(),
+                rig.name
+            ),
         };
         Ok(ControlOptions {
             action_steps: self.action_steps,
@@ -109,7 +113,10 @@ pub fn rig_for(policy: &Policy, rig: Option<&str>) -> Result<Rig> {
     match scaledp_deploy::check::trained_rig(policy.config()) {
         Some(Ok(rig)) => Ok(rig),
         Some(Err(name)) => Ok(Rig::load_or_builtin(&name)?),
-        None => bail!("checkpoint {} names no rig: pass --rig", policy.dir().display()),
+        None => bail!(
+            "checkpoint {} names no rig: pass --rig",
+            policy.dir().display()
+        ),
     }
 }
 
@@ -148,7 +155,9 @@ pub fn run(a: ServeArgs) -> Result<ExitStatus> {
     opts.seed = a.seed;
     if a.dry_run {
         let r = rig.clone();
-        opts.on_commands = Some(Arc::new(move |tick, cmds| println!("{}", describe(tick, cmds, &r))));
+        opts.on_commands = Some(Arc::new(move |tick, cmds| {
+            println!("{}", describe(tick, cmds, &r))
+        }));
     }
     // The checkpoint is checked against the rig before the session opens.
     let ckpt = policy.dir().display().to_string();
@@ -159,12 +168,19 @@ pub fn run(a: ServeArgs) -> Result<ExitStatus> {
         "serving {ckpt} on rig {} at {} Hz{}",
         rig.name,
         rig.control_rate_hz,
-        if a.dry_run { " (dry run: nothing is published)" } else { "" }
+        if a.dry_run {
+            " (dry run: nothing is published)"
+        } else {
+            ""
+        }
     );
     let stop = super::interrupt_flag();
     let started = Instant::now();
     let mut last = Instant::now();
-    while !stop.load(Ordering::Relaxed) && a.duration.is_none_or(|d| started.elapsed().as_secs_f64() < d) {
+    while !stop.load(Ordering::Relaxed)
+        && a.duration
+            .is_none_or(|d| started.elapsed().as_secs_f64() < d)
+    {
         std::thread::sleep(Duration::from_millis(50));
         if last.elapsed() >= Duration::from_secs(1) {
             last = Instant::now();

@@ -1,0 +1,44 @@
+//! The controller's settings.
+
+use crate::safety::Workspace;
+
+/// How the controller acts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlOptions {
+    /// Actions executed per chunk (diffusion_policy's action horizon), 1 … C.
+    pub action_steps: usize,
+    /// Workspace box per arm; `None`: [`Workspace::for_rig`].
+    pub workspace: Option<Vec<Workspace>>,
+    /// Largest TCP translation per tick (m).
+    pub max_step_m: f64,
+    /// Largest TCP rotation per tick (rad).
+    pub max_step_rad: f64,
+    /// A stream silent for more than this many of its periods stops the commands.
+    pub stale_periods: f64,
+    /// …but never for less than this (s): a 1 kHz arm's two periods are shorter than a busy
+    /// machine's scheduling jitter.
+    pub min_silence_s: f64,
+    /// The converter's frame freshness rule (`--stale-periods`, 1.5).
+    pub frame_stale_periods: f64,
+    /// The observation tick runs this far behind the receive clock (s), so that joints have a
+    /// sample after it and the tick's camera frames (tens of ms in flight) have arrived.
+    pub obs_lag_s: f64,
+    /// JPEG quality of the dataset's frames (the converter's default, 90).
+    pub jpeg_quality: u8,
+}
+
+impl Default for ControlOptions {
+    fn default() -> Self {
+        ControlOptions {
+            action_steps: 8,
+            workspace: None,
+            max_step_m: 0.05,
+            max_step_rad: 0.25,
+            stale_periods: 2.0,
+            min_silence_s: 0.05,
+            frame_stale_periods: 1.5,
+            obs_lag_s: 0.05,
+            jpeg_quality: 90,
+        }
+    }
+}
