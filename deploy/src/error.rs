@@ -28,6 +28,9 @@ pub enum Error {
         /// The cause.
         source: std::io::Error,
     },
+    /// A rollout's recording failed.
+    #[error(transparent)]
+    Recorder(#[from] scaledp_recorder::Error),
     /// The simulator failed.
     #[error(transparent)]
     Sim(#[from] scaledp_sim::Error),

@@ -10,6 +10,7 @@
 //! [`HELD_OUT_SEED`], far from any collection run's, so evaluation scenes are never training
 //! scenes.
 
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -21,10 +22,14 @@ use serde::Serialize;
 
 use crate::controller::{ControlOptions, Controller};
 use crate::error::{Error, Result};
+use crate::recording::Rollout;
 use crate::stats::{percentile, wilson_interval};
 
 /// Eval's default first seed: collect's seeds start at 0.
 pub const HELD_OUT_SEED: u64 = 1_000_000;
+
+/// Simulated time t is stamped `ORIGIN_NS + t` (an epoch time, as a rig's clock would give).
+pub const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -39,6 +44,8 @@ pub struct EvalOptions {
     pub settle_s: f64,
     /// The controller's settings.
     pub control: ControlOptions,
+    /// Keep each rollout as an MCAP episode here (`episode_<i>.mcap`, i = episode number).
+    pub recordings: Option<PathBuf>,
 }
 
 impl Default for EvalOptions {
@@ -49,6 +56,7 @@ impl Default for EvalOptions {
             max_seconds: 30.0,
             settle_s: 1.0,
             control: ControlOptions::default(),
+            recordings: None,
         }
     }
 }
@@ -76,6 +84,8 @@ pub struct EpisodeReport {
     pub halted_ticks: u64,
     /// Wall-clock time of the episode (s).
     pub wall_s: f64,
+    /// The rollout's MCAP file (`--recordings`).
+    pub recording: Option<String>,
 }
 
 /// The run's report (`--report` JSON).
@@ -173,7 +183,25 @@ pub fn run_eval(
     let mut episodes = Vec::new();
     for i in 0..opts.episodes {
         let seed = opts.seed + i;
-        let ep = episode(policy, rig, &scene, &mut ctl, seed, opts, &mut latencies_ms)?;
+        let mut rollout = match &opts.recordings {
+            Some(dir) => Some(Rollout::create(dir, i, rig, seed, &ckpt, ORIGIN_NS)?),
+            None => None,
+        };
+        let mut ep = episode(
+            policy,
+            rig,
+            &scene,
+            &mut ctl,
+            seed,
+            opts,
+            &mut latencies_ms,
+            rollout.as_mut(),
+        )?;
+        if let Some(r) = rollout {
+            let end = ORIGIN_NS + (ep.duration_s * 1e9) as u64;
+            let path = r.finish(ep.success, end, ep.duration_s)?;
+            ep.recording = Some(path.display().to_string());
+        }
         on_episode(&ep);
         episodes.push(ep);
     }
@@ -203,6 +231,7 @@ pub fn run_eval(
     })
 }
 
+#[allow(clippy::too_many_arguments)]
 fn episode(
     policy: &Policy,
     rig: &Rig,
@@ -211,13 +240,19 @@ fn episode(
     seed: u64,
     opts: &EvalOptions,
     latencies_ms: &mut Vec<f64>,
+    mut rollout: Option<&mut Rollout>,
 ) -> Result<EpisodeReport> {
     let wall = Instant::now();
     let mut world = World::with_scene(scene.clone(), seed);
     ctl.reset();
     let mut sources: Vec<(Source, u64, u64)> = Vec::new(); // (source, period ns, next ns)
     let period = |hz: f64| (1e9 / hz).round().max(1.0) as u64;
-    for &c in ctl.cameras() {
+    // Every camera when recording (a converted rollout needs them all), else the checkpoint's.
+    let cameras: Vec<usize> = match rollout {
+        Some(_) => (0..rig.cameras.len()).collect(),
+        None => ctl.cameras().to_vec(),
+    };
+    for c in cameras {
         let cam = &rig.cameras[c];
         let view = View::for_camera(scene, cam, c);
         sources.push((Source::Camera { rig_index: c, view }, period(cam.fps), 0));
@@ -243,6 +278,7 @@ fn episode(
         clamped_ticks: 0,
         halted_ticks: 0,
         wall_s: 0.0,
+        recording: None,
     };
     loop {
         let next_sample = sources.iter().map(|s| s.2).min().unwrap_or(u64::MAX);
@@ -251,30 +287,46 @@ fn episode(
             break;
         }
         world.step(t.saturating_sub(world.time_ns()) as f64 * 1e-9, &[]);
+        let abs = ORIGIN_NS + t;
         for (src, per, next) in sources.iter_mut().filter(|s| s.2 == t) {
             *next += *per;
             match src {
                 Source::Camera { rig_index, view } => {
                     let cam = &rig.cameras[*rig_index];
                     render(scene, view, &world.state(), cam.encoding(), &mut pixels);
-                    let msg = messages::image(cam, pixels.clone(), t);
-                    ctl.on_image(*rig_index, t, t, "sensor_msgs/msg/Image", msg.to_cdr());
+                    let cdr = messages::image(cam, pixels.clone(), abs).to_cdr();
+                    if let Some(r) = rollout.as_deref_mut() {
+                        r.write(&cam.topic, abs, &cdr)?;
+                    }
+                    ctl.on_image(*rig_index, abs, abs, "sensor_msgs/msg/Image", cdr);
                 }
-                Source::Arm(a) => ctl.on_arm_joints(*a, t, t, world.arm_state(*a).q),
+                Source::Arm(a) => {
+                    let s = world.arm_state(*a);
+                    if let Some(r) = rollout.as_deref_mut() {
+                        let arm = &rig.arms[*a];
+                        let js = messages::joint_state(arm, &s, abs).to_cdr();
+                        r.write(&arm.joint_state_topic, abs, &js)?;
+                    }
+                    ctl.on_arm_joints(*a, abs, abs, s.q);
+                }
                 Source::Gripper(a) => {
                     let s = world.arm_state(*a);
                     if let Some(g) = &rig.arms[*a].gripper {
+                        if let Some(r) = rollout.as_deref_mut() {
+                            let js = messages::gripper_state(g, s.gripper_width_m, abs).to_cdr();
+                            r.write(&g.topic, abs, &js)?;
+                        }
                         let q = g
                             .model
                             .positions_for_width(s.gripper_width_m, g.joint_names.len());
-                        ctl.on_gripper_joints(*a, t, t, q);
+                        ctl.on_gripper_joints(*a, abs, abs, q);
                     }
                 }
             }
         }
         if t == next_tick {
             next_tick += tick_period;
-            let tick = ctl.tick(t);
+            let tick = ctl.tick(abs);
             if tick.halted.is_some() {
                 rep.halted_ticks += 1;
             }
@@ -289,6 +341,21 @@ fn episode(
             if let Ok(cmds) = ctl.command() {
                 rep.commanded_ticks += 1;
                 rep.clamped_ticks += u64::from(cmds.iter().any(|c| c.clamped.any()));
+                if let Some(r) = rollout.as_deref_mut() {
+                    for c in &cmds {
+                        let arm = &rig.arms[c.arm];
+                        if let Some(topic) = &arm.command_topic {
+                            let m = messages::pose_command(arm, &c.base_from_tcp, abs);
+                            r.write(topic, abs, &m.to_cdr())?;
+                        }
+                        if let (Some(g), Some(w)) = (&arm.gripper, c.gripper_width_m) {
+                            if let Some(topic) = &g.command_topic {
+                                let m = messages::gripper_command(g, w, abs);
+                                r.write(topic, abs, &m.to_cdr())?;
+                            }
+                        }
+                    }
+                }
                 let arm_cmds: Vec<ArmCommand> = cmds
                     .iter()
                     .map(|c| ArmCommand {

@@ -18,6 +18,7 @@ pub mod controller;
 mod error;
 pub mod eval;
 mod options;
+mod recording;
 pub mod safety;
 pub mod serve;
 pub mod stats;

@@ -66,3 +66,54 @@ fn eval_reports_two_short_episodes_the_same_way_twice() {
         assert_eq!((a.chunks, a.commanded_ticks), (b.chunks, b.commanded_ticks));
     }
 }
+
+#[test]
+fn a_recorded_rollout_converts_into_an_episode_whose_actions_are_the_commands() {
+    use scaledp_converter::{convert, read_mcap, ConvertOptions, InMemory};
+    let rig = common::light_rig();
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = common::write(dir.path(), &common::Spec::at_home(&rig));
+    let policy = Policy::load(&ckpt, &Device::Cpu).unwrap();
+    let opts = EvalOptions {
+        episodes: 1,
+        seed: 1_000_000,
+        max_seconds: 2.0,
+        recordings: Some(dir.path().join("rollouts")),
+        ..EvalOptions::default()
+    };
+    let report = run_eval(&policy, &rig, &opts, &mut |_| {}).unwrap();
+    let path = std::path::PathBuf::from(report.episodes[0].recording.clone().unwrap());
+    assert!(path.ends_with("rollouts/episode_000000.mcap"), "{path:?}");
+    let rec = read_mcap(&path, &|_| true).unwrap();
+    let ep = convert(
+        &path,
+        &rec,
+        &InMemory(&rec),
+        &ConvertOptions::default().size(24, 24),
+    )
+    .unwrap();
+    // 2 s at 10 Hz, the first command at the second tick; the action is the command topic's
+    // pose (the rest pose ± 1 cm) and the gripper command (clamped to the hand's 8 cm).
+    assert!((14..=20).contains(&ep.len()), "{} frames", ep.len());
+    let home = common::home_action(&rig);
+    for row in ep.action.chunks(7) {
+        for d in 0..3 {
+            assert!(
+                (f64::from(row[d]) - home[d]).abs() < 0.011,
+                "{row:?} vs {home:?}"
+            );
+        }
+        assert!((f64::from(row[6]) - 0.04).abs() < 0.011, "{row:?}");
+    }
+    let label = rec
+        .metadata
+        .get(scaledp_schema::episode::END_RECORD)
+        .and_then(|m| m.get(scaledp_schema::episode::keys::OUTCOME))
+        .cloned();
+    assert_eq!(
+        label.as_deref(),
+        Some("failure"),
+        "{:?}",
+        rec.metadata.keys().collect::<Vec<_>>()
+    );
+}

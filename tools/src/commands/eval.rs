@@ -37,6 +37,10 @@ pub struct EvalArgs {
     /// Refuse seeds listed in this collection manifest (`collect.jsonl` of `scaledp collect`).
     #[arg(long, value_name = "FILE")]
     pub collected: Option<PathBuf>,
+    /// Keep each rollout as an MCAP episode here (episode_<i>.mcap, labelled by the scorer;
+    /// `scaledp convert` takes them like recorded demonstrations).
+    #[arg(long, value_name = "DIR")]
+    pub recordings: Option<PathBuf>,
     /// The JSON report (default: eval-<rig>-seed<S>-n<N>.json in the checkpoint directory).
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
@@ -64,6 +68,7 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         max_seconds: a.max_seconds,
         settle_s: a.settle_s,
         control: a.control.options(&rig)?,
+        recordings: a.recordings.clone(),
     };
     let bar = ProgressBar::new(a.episodes).with_style(
         ProgressStyle::with_template(
