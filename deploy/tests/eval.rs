@@ -117,3 +117,30 @@ fn a_recorded_rollout_converts_into_an_episode_whose_actions_are_the_commands() 
         rec.metadata.keys().collect::<Vec<_>>()
     );
 }
+
+#[test]
+fn the_bimanual_cell_is_driven_through_the_14_d_action_path() {
+    let mut rig = scaledp_schema::Rig::builtin("bimanual_ur5_sim").unwrap();
+    for c in &mut rig.cameras {
+        c.width = 64;
+        c.height = 48;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let spec = common::Spec::at_home(&rig);
+    assert_eq!(spec.dim, 14);
+    let ckpt = common::write(dir.path(), &spec);
+    let policy = Policy::load(&ckpt, &Device::Cpu).unwrap();
+    let opts = EvalOptions {
+        episodes: 1,
+        max_seconds: 1.5,
+        ..EvalOptions::default()
+    };
+    let report = run_eval(&policy, &rig, &opts, &mut |_| {}).unwrap();
+    let e = &report.episodes[0];
+    assert_eq!(e.cube_distance_m.len(), 2, "two cubes");
+    assert!(e.commanded_ticks >= 12 && e.halted_ticks == 0, "{e:?}");
+    assert_eq!(
+        e.clamped_ticks, 0,
+        "commands near both rest poses need no clamping: {e:?}"
+    );
+}

@@ -47,6 +47,8 @@ pub struct Spec {
     pub cameras: Vec<String>,
     /// Per-arm dims × arms.
     pub dim: usize,
+    /// State and action names (used when there are `dim` of them).
+    pub names: Vec<String>,
     /// Actions are `centre + noise / spread` (noise in [−1, 1]).
     pub centre: Vec<f64>,
     /// See `centre`.
@@ -64,6 +66,7 @@ impl Spec {
                 .map(|c| format!("observation.images.{}", c.name))
                 .collect(),
             dim: 7 * rig.arms.len(),
+            names: scaledp_converter::state_names(rig),
             centre: home_action(rig),
             spread: 100.0,
         }
@@ -93,10 +96,8 @@ pub fn write(root: &Path, spec: &Spec) -> PathBuf {
         .unwrap()
         .save(&dir.join("model.safetensors"))
         .unwrap();
-    let names: Vec<String> = if spec.dim == 7 {
-        ["x", "y", "z", "roll", "pitch", "yaw", "gripper"]
-            .map(String::from)
-            .to_vec()
+    let names: Vec<String> = if spec.names.len() == spec.dim {
+        spec.names.clone()
     } else {
         (0..spec.dim).map(|i| format!("d{i}")).collect()
     };
