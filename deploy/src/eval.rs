@@ -95,7 +95,8 @@ pub struct EvalReport {
     pub checkpoint: String,
     /// The rig.
     pub rig: String,
-    /// `simulated-time`: inference takes no simulated time.
+    /// `simulated-time` (inference takes no simulated time) or `live` (sim + serve over
+    /// loopback Zenoh in real time).
     pub mode: String,
     /// First seed.
     pub seed: u64,
@@ -117,6 +118,8 @@ pub struct EvalReport {
     pub inference_ms_p50: Option<f64>,
     /// Inference latency per chunk, 99th percentile (ms).
     pub inference_ms_p99: Option<f64>,
+    /// Live only: median over episodes of serve's newest-frame-to-first-command latency (ms).
+    pub e2e_ms_p50: Option<f64>,
     /// Wall-clock time of the whole run (s).
     pub wall_s: f64,
 }
@@ -205,6 +208,29 @@ pub fn run_eval(
         on_episode(&ep);
         episodes.push(ep);
     }
+    let mut report = summarize(
+        &ckpt,
+        rig,
+        "simulated-time",
+        opts,
+        policy.config().fps,
+        episodes,
+    );
+    report.inference_ms_p50 = percentile(&latencies_ms, 0.5);
+    report.inference_ms_p99 = percentile(&latencies_ms, 0.99);
+    report.wall_s = started.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// The report of `episodes` (latencies and wall time left for the caller).
+pub(crate) fn summarize(
+    ckpt: &str,
+    rig: &Rig,
+    mode: &str,
+    opts: &EvalOptions,
+    fps: f64,
+    episodes: Vec<EpisodeReport>,
+) -> EvalReport {
     let n = episodes.len() as u64;
     let successes = episodes.iter().filter(|e| e.success).count() as u64;
     let times: Vec<f64> = episodes
@@ -212,23 +238,24 @@ pub fn run_eval(
         .filter_map(|e| e.time_to_success_s)
         .collect();
     let (lo, hi) = wilson_interval(successes, n);
-    Ok(EvalReport {
-        checkpoint: ckpt,
+    EvalReport {
+        checkpoint: ckpt.to_string(),
         rig: rig.name.clone(),
-        mode: "simulated-time".into(),
+        mode: mode.into(),
         seed: opts.seed,
         action_steps: opts.control.action_steps,
-        control_rate_hz: policy.config().fps,
+        control_rate_hz: fps,
         successes,
         success_rate: successes as f64 / n.max(1) as f64,
         wilson_95: [lo, hi],
         mean_time_to_success_s: (!times.is_empty())
             .then(|| times.iter().sum::<f64>() / times.len() as f64),
-        inference_ms_p50: percentile(&latencies_ms, 0.5),
-        inference_ms_p99: percentile(&latencies_ms, 0.99),
-        wall_s: started.elapsed().as_secs_f64(),
+        inference_ms_p50: None,
+        inference_ms_p99: None,
+        e2e_ms_p50: None,
+        wall_s: 0.0,
         episodes,
-    })
+    }
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -9,7 +9,8 @@
 //!   and the simulator use them) with inference on its own thread, overlapping execution.
 //! - [`eval`] runs seeded episodes of the simulated task in simulated time — the world stepped,
 //!   the cameras rendered and the same core called synchronously — and reports the success
-//!   rate with its 95 % Wilson interval ([`stats`]).
+//!   rate with its 95 % Wilson interval ([`stats`]); [`live`] runs the simulator and [`serve`]
+//!   over loopback Zenoh in real time instead.
 //! - [`check`] refuses, in one line and before anything moves, a checkpoint for another rig or
 //!   a rig lacking the checkpoint's cameras or dimensions.
 
@@ -17,6 +18,7 @@ pub mod check;
 pub mod controller;
 mod error;
 pub mod eval;
+pub mod live;
 mod options;
 mod recording;
 pub mod safety;
@@ -27,6 +29,7 @@ mod streams;
 pub use controller::{Command, ControlOptions, Controller, Request, Tick};
 pub use error::{Error, Result};
 pub use eval::{run_eval, EpisodeReport, EvalOptions, EvalReport};
+pub use live::run_live;
 pub use safety::{Limits, Workspace};
 pub use serve::{ServeOptions, Server, Status};
 pub use stats::{percentile, wilson_interval};

@@ -144,3 +144,34 @@ fn the_bimanual_cell_is_driven_through_the_14_d_action_path() {
         "commands near both rest poses need no clamping: {e:?}"
     );
 }
+
+#[test]
+fn a_live_episode_runs_the_sim_and_serve_over_loopback() {
+    use zenoh::Wait;
+    let rig = common::light_rig();
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = common::write(dir.path(), &common::Spec::at_home(&rig));
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let cfg =
+        scaledp_recorder::net::zenoh_config(None, &[], &[format!("tcp/127.0.0.1:{port}")]).unwrap();
+    let session = zenoh::open(cfg).wait().unwrap();
+    let opts = EvalOptions {
+        episodes: 1,
+        max_seconds: 2.5,
+        ..EvalOptions::default()
+    };
+    let report =
+        scaledp_deploy::run_live(&ckpt, &Device::Cpu, &rig, &opts, &session, &mut |_| {}).unwrap();
+    assert_eq!(report.mode, "live");
+    let e = &report.episodes[0];
+    assert!(!e.success && e.time_to_success_s.is_none(), "{e:?}");
+    assert!((2.5..4.0).contains(&e.duration_s), "{e:?}");
+    // About 10 Hz for 2.5 s, less the first chunk's latency.
+    assert!((15..=26).contains(&e.commanded_ticks), "{e:?}");
+    assert!(e.chunks >= 3 && e.halted_ticks <= 2, "{e:?}");
+    assert!(report.e2e_ms_p50.unwrap() >= report.inference_ms_p50.unwrap());
+}

@@ -37,6 +37,10 @@ pub struct EvalArgs {
     /// Refuse seeds listed in this collection manifest (`collect.jsonl` of `scaledp collect`).
     #[arg(long, value_name = "FILE")]
     pub collected: Option<PathBuf>,
+    /// Run the simulator and `serve` over a loopback Zenoh session in real time (the deployed
+    /// path, inference overlapping execution) instead of the deterministic simulated time.
+    #[arg(long)]
+    pub live: bool,
     /// Keep each rollout as an MCAP episode here (episode_<i>.mcap, labelled by the scorer;
     /// `scaledp convert` takes them like recorded demonstrations).
     #[arg(long, value_name = "DIR")]
@@ -77,7 +81,10 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let mut ok = 0u64;
-    let report = run_eval(&policy, &rig, &opts, &mut |e| {
+    if a.live && a.recordings.is_some() {
+        bail!("--recordings is not available with --live (run `scaledp record` beside it)");
+    }
+    let mut on_episode = |e: &scaledp_deploy::EpisodeReport| {
         ok += u64::from(e.success);
         let outcome = match e.time_to_success_s {
             Some(t) if e.success => format!("success at {t:.1} s"),
@@ -97,10 +104,25 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         bar.suspend(|| println!("{line}"));
         bar.inc(1);
         bar.set_message(format!("{ok} successes"));
-    })?;
+    };
+    let report = if a.live {
+        // Only this process joins: a session listening on a free loopback port.
+        let port = std::net::TcpListener::bind("127.0.0.1:0")?
+            .local_addr()?
+            .port();
+        let config =
+            scaledp_recorder::net::zenoh_config(None, &[], &[format!("tcp/127.0.0.1:{port}")])?;
+        let session = scaledp_recorder::net::open(config)?;
+        let dev = super::train::device(&a.control.device)?;
+        let dir = policy.dir().to_path_buf();
+        drop(policy);
+        scaledp_deploy::run_live(&dir, &dev, &rig, &opts, &session, &mut on_episode)?
+    } else {
+        run_eval(&policy, &rig, &opts, &mut on_episode)?
+    };
     bar.finish_and_clear();
     let path = a.report.clone().unwrap_or_else(|| {
-        policy.dir().join(format!(
+        std::path::Path::new(&report.checkpoint).join(format!(
             "eval-{}-seed{}-n{}.json",
             rig.name, a.seed, a.episodes
         ))
@@ -110,7 +132,7 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
     let [lo, hi] = report.wilson_95;
     println!(
         "{} episodes of {} (seeds {}..={}): {} successes ({:.1} %, 95 % Wilson {:.1}–{:.1} %), \
-         mean time to success {}, inference p50 {} ms p99 {} ms, {:.1} s wall; report {}",
+         mean time to success {}, inference p50 {} ms p99 {} ms{}, {:.1} s wall; report {}",
         report.episodes.len(),
         rig.name,
         a.seed,
@@ -124,6 +146,9 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
             .map_or("–".into(), |t| format!("{t:.1} s")),
         ms(report.inference_ms_p50),
         ms(report.inference_ms_p99),
+        report
+            .e2e_ms_p50
+            .map_or(String::new(), |v| format!(", frame→command p50 {v:.0} ms")),
         report.wall_s,
         path.display()
     );
