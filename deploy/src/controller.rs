@@ -131,12 +131,19 @@ impl Controller {
             .iter()
             .map(|a| ArmKinematics::new(a).map_err(|e| Error::Incompatible(e.to_string())))
             .collect::<Result<Vec<_>>>()?;
+        // Frames are big (a raw HD720 bgra8 frame is 3.7 MB): keep those a tick can still pick,
+        // the observation lag plus a few frame periods.
+        let keep_frames_s = opts.obs_lag_s + 0.15;
         let frames = cams
             .iter()
             .map(|&i| {
                 let c = &rig.cameras[i];
                 (
-                    Series::new(format!("camera {} ({})", c.name, c.topic), c.fps),
+                    Series::new(
+                        format!("camera {} ({})", c.name, c.topic),
+                        c.fps,
+                        keep_frames_s,
+                    ),
                     VecDeque::new(),
                 )
             })
@@ -148,6 +155,7 @@ impl Controller {
                 Series::new(
                     format!("arm {} ({})", a.name, a.joint_state_topic),
                     a.rate_hz,
+                    1.0,
                 )
             })
             .collect();
@@ -155,9 +163,13 @@ impl Controller {
             .arms
             .iter()
             .map(|a| {
-                a.gripper
-                    .as_ref()
-                    .map(|g| Series::new(format!("gripper of {} ({})", a.name, g.topic), g.rate_hz))
+                a.gripper.as_ref().map(|g| {
+                    Series::new(
+                        format!("gripper of {} ({})", a.name, g.topic),
+                        g.rate_hz,
+                        1.0,
+                    )
+                })
             })
             .collect();
         let n = rig.arms.len();
@@ -225,7 +237,7 @@ impl Controller {
     /// Forgets everything (a new episode): buffers, window, plan, the last commands.
     pub fn reset(&mut self) {
         for (s, m) in &mut self.frames {
-            *s = Series::new(s.name.clone(), 1.0 / s.period_s);
+            *s = s.cleared();
             m.clear();
         }
         for s in self
@@ -233,7 +245,7 @@ impl Controller {
             .iter_mut()
             .chain(self.fingers.iter_mut().flatten())
         {
-            *s = Series::new(s.name.clone(), 1.0 / s.period_s);
+            *s = s.cleared();
         }
         self.origin_ns = None;
         self.index = 0;

@@ -14,16 +14,30 @@ pub(crate) struct Series {
     pub(crate) stamps: VecDeque<u64>,
     values: VecDeque<Vec<f64>>,
     pub(crate) last_heard_ns: Option<u64>,
+    keep: usize,
 }
 
 impl Series {
-    pub(crate) fn new(name: String, rate_hz: f64) -> Self {
+    /// A stream at `rate_hz` keeping about `keep_s` seconds of samples (never fewer than 4).
+    pub(crate) fn new(name: String, rate_hz: f64, keep_s: f64) -> Self {
         Series {
             name,
             period_s: 1.0 / rate_hz,
             stamps: VecDeque::new(),
             values: VecDeque::new(),
             last_heard_ns: None,
+            keep: ((keep_s * rate_hz).ceil() as usize).max(2) + 2,
+        }
+    }
+
+    /// The same stream, emptied.
+    pub(crate) fn cleared(&self) -> Self {
+        Series {
+            name: self.name.clone(),
+            stamps: VecDeque::new(),
+            values: VecDeque::new(),
+            last_heard_ns: None,
+            ..*self
         }
     }
     pub(crate) fn push(&mut self, stamp_ns: u64, recv_ns: u64, v: Vec<f64>) {
@@ -33,9 +47,7 @@ impl Series {
         }
         self.stamps.push_back(stamp_ns);
         self.values.push_back(v);
-        // Keep about one second, and never fewer than two samples.
-        let keep = ((1.0 / self.period_s).ceil() as usize).max(2) + 2;
-        while self.stamps.len() > keep {
+        while self.stamps.len() > self.keep {
             self.stamps.pop_front();
             self.values.pop_front();
         }

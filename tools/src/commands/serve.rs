@@ -34,6 +34,14 @@ pub struct ControlArgs {
     /// it and the tick's camera frames have arrived.
     #[arg(long, default_value_t = 50.0)]
     pub obs_lag_ms: f64,
+    /// Stop commanding when a camera or arm stream is silent for more than this many of its
+    /// periods…
+    #[arg(long, default_value_t = 2.0)]
+    pub stale_periods: f64,
+    /// …but never for less than this (ms): two periods of a 1 kHz arm are shorter than a busy
+    /// machine's scheduling jitter.
+    #[arg(long, default_value_t = 50.0)]
+    pub min_silence_ms: f64,
     /// cpu, or cuda (a build with the `cuda` feature of scaledp-policy).
     #[arg(long, default_value = "cpu")]
     pub device: String,
@@ -67,6 +75,8 @@ impl ControlArgs {
             max_step_m: self.max_step_m,
             max_step_rad: self.max_step_rad,
             obs_lag_s: self.obs_lag_ms * 1e-3,
+            stale_periods: self.stale_periods,
+            min_silence_s: self.min_silence_ms * 1e-3,
             ..ControlOptions::default()
         })
     }
