@@ -15,24 +15,27 @@ use crate::frames::FrameStore;
 use crate::lerobot::{Dataset, EpisodeRecord};
 use crate::source::{Recording, TopicInfo};
 
-/// Settings of a conversion job.
+/// Settings of a conversion job, set with chained setters. Defaults: [`ConvertOptions`]'s
+/// defaults, no overwrite, no shard, one job per core, data files of 100 MiB, `failure`
+/// episodes skipped, no split.
+///
+/// ```no_run
+/// use scaledp_converter::{ConvertOptions, JobOptions};
+/// let opts = JobOptions::default()
+///     .convert(ConvertOptions::default().task("stack the cups"))
+///     .jobs(4);
+/// let results = scaledp_converter::run(&["demos/episode_000000.mcap".into()], "ds".as_ref(), &opts, &|_| {})?;
+/// # Ok::<(), scaledp_converter::Error>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct JobOptions {
-    /// Per-episode conversion settings.
-    pub convert: ConvertOptions,
-    /// Reconvert inputs already in the dataset (the dataset is rebuilt from scratch).
-    pub overwrite: bool,
-    /// Convert only slice `i` of `n` of the sorted inputs (contiguous, so merging the shards in
-    /// order equals one run).
-    pub shard: Option<(usize, usize)>,
-    /// Episodes converted at once (each holds its recording in memory).
-    pub jobs: usize,
-    /// Data file size target (MB).
-    pub file_size_mb: u64,
-    /// Also convert episodes whose recorded outcome is `failure`.
-    pub include_failures: bool,
-    /// Split an input into several episodes wherever no message was logged for this long (s).
-    pub split_gap_s: Option<f64>,
+    convert: ConvertOptions,
+    overwrite: bool,
+    shard: Option<(usize, usize)>,
+    jobs: usize,
+    file_size_mib: u64,
+    include_failures: bool,
+    split_gap_s: Option<f64>,
 }
 
 impl Default for JobOptions {
@@ -42,35 +45,76 @@ impl Default for JobOptions {
             overwrite: false,
             shard: None,
             jobs: std::thread::available_parallelism().map_or(2, usize::from),
-            file_size_mb: 100,
+            file_size_mib: 100,
             include_failures: false,
             split_gap_s: None,
         }
     }
 }
 
-/// What happened to one input.
-#[derive(Debug, Clone)]
-pub enum Outcome {
-    /// Converted and committed (several episodes when the input was split on time gaps).
-    Converted(Vec<EpisodeRecord>),
-    /// Already in the dataset (same content hash), or excluded by its recorded outcome.
-    Skipped(String),
-    /// Could not be converted: one line naming the file and the reason.
-    Failed(String),
+impl JobOptions {
+    /// Per-episode conversion settings.
+    pub fn convert(mut self, convert: ConvertOptions) -> Self {
+        self.convert = convert;
+        self
+    }
+    /// Reconvert inputs already in the dataset: the dataset is rebuilt from scratch.
+    pub fn overwrite(mut self, yes: bool) -> Self {
+        self.overwrite = yes;
+        self
+    }
+    /// Convert only slice `i` of `n` of the sorted inputs (contiguous, so merging the shards in
+    /// order equals one run); `run` refuses `i >= n`.
+    pub fn shard(mut self, i: usize, n: usize) -> Self {
+        self.shard = Some((i, n));
+        self
+    }
+    /// Episodes converted at once (each holds its recording in memory; at least 1).
+    pub fn jobs(mut self, n: usize) -> Self {
+        self.jobs = n.max(1);
+        self
+    }
+    /// Data file size target in MiB (LeRobot's `data_files_size_in_mb`, which LeRobot itself
+    /// measures in MiB): a file is closed once it reaches it.
+    pub fn file_size_mib(mut self, mib: u64) -> Self {
+        self.file_size_mib = mib;
+        self
+    }
+    /// Also convert episodes whose recorded outcome is `failure`.
+    pub fn include_failures(mut self, yes: bool) -> Self {
+        self.include_failures = yes;
+        self
+    }
+    /// Split an input into several episodes wherever no message was logged for `seconds`.
+    pub fn split_gap(mut self, seconds: f64) -> Self {
+        self.split_gap_s = Some(seconds);
+        self
+    }
 }
 
-/// Progress events for a front end.
-#[derive(Debug, Clone)]
-pub enum Progress {
+/// What happened to one input of a [`run`].
+#[derive(Debug)]
+pub enum InputResult {
+    /// Converted and committed (several episodes when the input was split on time gaps).
+    Converted(Vec<EpisodeRecord>),
+    /// Already in the dataset (same content hash), or excluded by its recorded outcome: why.
+    Skipped(String),
+    /// Could not be converted; the error names the file and the reason
+    /// ([`Error::one_line`] for a report).
+    Failed(Error),
+}
+
+/// Progress events of a [`run`], for a front end.
+#[derive(Debug)]
+pub enum Progress<'a> {
     /// The number of inputs in this job (after sharding).
     Total(usize),
     /// One input is done.
     Done {
         /// The input.
-        input: PathBuf,
+        input: &'a Path,
         /// What happened.
-        outcome: Outcome,
+        result: &'a InputResult,
         /// Frames in the episode (0 unless converted).
         frames: usize,
         /// Bytes of the input.
@@ -238,7 +282,8 @@ fn windows(
     out
 }
 
-type Converted = std::result::Result<Vec<Episode>, Outcome>;
+/// An input's episodes, or why there are none.
+type Episodes = std::result::Result<Vec<Episode>, InputResult>;
 
 /// True when the input with content hash `h` is in the dataset whole: as one episode, or as
 /// every part `h#k/n` of a split.
@@ -264,9 +309,9 @@ fn is_mcap_file(path: &Path) -> bool {
 
 /// Converts one input; for an MCAP file with `hash`, also returns its [`content_hash`], taken
 /// during the one read (no second pass over the file).
-fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option<String>) {
-    let failed = |e: Error| Outcome::Failed(one_line(&e));
-    let run = |rec: &Recording, frames: &dyn FrameStore| -> Converted {
+fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Episodes, Option<String>) {
+    let failed = InputResult::Failed;
+    let run = |rec: &Recording, frames: &dyn FrameStore| -> Episodes {
         check_outcome(path, rec, opts)?;
         let parts = windows(rec, frames, opts.split_gap_s);
         let split = parts.len() > 1;
@@ -305,24 +350,15 @@ fn convert_one(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option
 
 /// [`convert_one`], a panic (a bug, never bad input) becoming a failure of this input alone
 /// instead of the end of the batch.
-fn convert_guarded(path: &Path, opts: &JobOptions, hash: bool) -> (Converted, Option<String>) {
+fn convert_guarded(path: &Path, opts: &JobOptions, hash: bool) -> (Episodes, Option<String>) {
     guarded(path, || convert_one(path, opts, hash))
-}
-
-/// An error as the one line a failed input gets (libraries' messages may end in a newline or
-/// span several).
-fn one_line(e: &Error) -> String {
-    e.to_string()
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// Runs `f`; a panic becomes a failed outcome naming `path` (and no hash).
 fn guarded(
     path: &Path,
-    f: impl FnOnce() -> (Converted, Option<String>),
-) -> (Converted, Option<String>) {
+    f: impl FnOnce() -> (Episodes, Option<String>),
+) -> (Episodes, Option<String>) {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
         let message = panic
             .downcast_ref::<&str>()
@@ -330,7 +366,7 @@ fn guarded(
             .or_else(|| panic.downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "unknown panic".into());
         let line = Error::input(path, format!("internal error while converting: {message}"));
-        (Err(Outcome::Failed(one_line(&line))), None)
+        (Err(InputResult::Failed(line)), None)
     })
 }
 
@@ -339,16 +375,16 @@ fn check_outcome(
     path: &Path,
     rec: &Recording,
     opts: &JobOptions,
-) -> std::result::Result<(), Outcome> {
+) -> std::result::Result<(), InputResult> {
     let label = crate::detect::episode_metadata(path, rec)
-        .map_err(|e| Outcome::Failed(one_line(&e)))?
+        .map_err(InputResult::Failed)?
         .and_then(|m| m.label);
     match label {
         Some(Label::Discarded) => {
-            return Err(Outcome::Skipped("recorded outcome: discarded".into()))
+            return Err(InputResult::Skipped("recorded outcome: discarded".into()))
         }
         Some(Label::Failure) if !opts.include_failures => {
-            return Err(Outcome::Skipped(
+            return Err(InputResult::Skipped(
                 "recorded outcome: failure (see --include-failures)".into(),
             ))
         }
@@ -364,8 +400,8 @@ pub fn run(
     inputs: &[PathBuf],
     out: &Path,
     opts: &JobOptions,
-    progress: &(dyn Fn(Progress) + Sync),
-) -> Result<Vec<(PathBuf, Outcome)>> {
+    progress: &(dyn Fn(Progress<'_>) + Sync),
+) -> Result<Vec<(PathBuf, InputResult)>> {
     let inputs = match opts.shard {
         Some((i, n)) if n > 0 && i < n => shard(inputs, i, n).to_vec(),
         Some((i, n)) => {
@@ -376,14 +412,14 @@ pub fn run(
         }
         None => inputs.to_vec(),
     };
-    let mut dataset = Dataset::open(out, opts.overwrite, opts.file_size_mb)?;
+    let mut dataset = Dataset::open(out, opts.overwrite, opts.file_size_mib)?;
     progress(Progress::Total(inputs.len()));
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.jobs.max(1))
         .build()
         .map_err(|e| Error::input(out, format!("thread pool: {e}")))?;
-    let (tx, rx) = mpsc::channel::<(usize, String, Converted)>();
-    let mut results: BTreeMap<usize, (PathBuf, Outcome)> = BTreeMap::new();
+    let (tx, rx) = mpsc::channel::<(usize, String, Episodes)>();
+    let mut results: BTreeMap<usize, (PathBuf, InputResult)> = BTreeMap::new();
     std::thread::scope(|scope| -> Result<()> {
         let inputs_ref = &inputs;
         let existing: Vec<String> = dataset
@@ -400,27 +436,24 @@ pub fn run(
                         let (hash, r) = match existing.is_empty() && is_mcap_file(path) {
                             // Nothing to skip: hash the file during its one read.
                             true => match convert_guarded(path, opts, true) {
-                                (r, Some(h)) => (Ok(h), r),
-                                (r, None) => (content_hash(path), r),
+                                (r, Some(h)) => (h, r),
+                                (r, None) => (content_hash(path).unwrap_or_default(), r),
                             },
-                            false => {
-                                let hash = content_hash(path);
-                                let r = match &hash {
-                                    Err(e) => Err(Outcome::Failed(one_line(e))),
-                                    Ok(h) if fully_converted(&existing, h) => {
-                                        Err(Outcome::Skipped("already in the dataset".into()))
-                                    }
-                                    Ok(_) => convert_guarded(path, opts, false).0,
-                                };
-                                (hash, r)
-                            }
+                            false => match content_hash(path) {
+                                Err(e) => (String::new(), Err(InputResult::Failed(e))),
+                                Ok(h) if fully_converted(&existing, &h) => {
+                                    let why = "already in the dataset".to_string();
+                                    (h, Err(InputResult::Skipped(why)))
+                                }
+                                Ok(h) => (h, convert_guarded(path, opts, false).0),
+                            },
                         };
-                        let _ = tx.send((i, hash.unwrap_or_default(), r));
+                        let _ = tx.send((i, hash, r));
                     });
             })
         });
         // Commit in input order: hold finished episodes until all before them are done.
-        let mut pending: BTreeMap<usize, (String, Converted)> = BTreeMap::new();
+        let mut pending: BTreeMap<usize, (String, Episodes)> = BTreeMap::new();
         let mut next = 0;
         for (i, hash, r) in rx {
             pending.insert(i, (hash, r));
@@ -447,22 +480,22 @@ pub fn run(
                                     records.push(rec);
                                 }
                                 Err(e @ Error::Rejected { .. }) => {
-                                    failure = Some(one_line(&e));
+                                    failure = Some(e);
                                     break;
                                 }
                                 Err(e) => return Err(e),
                             }
                         }
                         match failure {
-                            Some(line) => (Outcome::Failed(line), frames),
-                            None => (Outcome::Converted(records), frames),
+                            Some(e) => (InputResult::Failed(e), frames),
+                            None => (InputResult::Converted(records), frames),
                         }
                     }
                     Err(o) => (o, 0),
                 };
                 progress(Progress::Done {
-                    input: path.clone(),
-                    outcome: outcome.clone(),
+                    input: &path,
+                    result: &outcome,
                     frames,
                     bytes: input_bytes(&path),
                 });
@@ -476,9 +509,10 @@ pub fn run(
 }
 
 /// Joins scaledp datasets (e.g. the outputs of `--shard 0/N … N-1/N`) into `out`, in the order
-/// given, re-indexing episodes, frames and tasks and re-aggregating statistics.
-pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mb: u64) -> Result<usize> {
-    let mut dataset = Dataset::open(out, true, file_size_mb)?;
+/// given, re-indexing episodes, frames and tasks and re-aggregating statistics; data files of
+/// `file_size_mib` MiB. Returns the number of episodes.
+pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mib: u64) -> Result<usize> {
+    let mut dataset = Dataset::open(out, true, file_size_mib)?;
     let mut n = 0;
     for input in inputs {
         let record = input.join("meta/scaledp.json");
@@ -497,9 +531,9 @@ pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mb: u64) -> Result<usize>
 mod tests {
     use super::*;
 
-    fn failure(r: Converted) -> String {
+    fn failure(r: Episodes) -> String {
         match r {
-            Err(Outcome::Failed(line)) => line,
+            Err(InputResult::Failed(e)) => e.to_string(),
             Err(other) => format!("not a failure: {other:?}"),
             Ok(_) => "converted".into(),
         }

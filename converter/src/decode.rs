@@ -17,6 +17,10 @@ fn wrap<T>(path: &Path, m: &RawMessage, r: std::result::Result<T, String>) -> Re
     })
 }
 
+fn text<T>(r: std::result::Result<T, impl std::fmt::Display>) -> std::result::Result<T, String> {
+    r.map_err(|e| e.to_string())
+}
+
 /// A camera frame: raw or compressed.
 #[derive(Debug, Clone)]
 pub enum Frame {
@@ -24,16 +28,6 @@ pub enum Frame {
     Raw(Image),
     /// `sensor_msgs/CompressedImage`.
     Compressed(CompressedImage),
-}
-
-impl Frame {
-    /// Capture stamp (ns).
-    pub fn stamp_ns(&self) -> u64 {
-        match self {
-            Self::Raw(i) => i.header.stamp.as_ns(),
-            Self::Compressed(c) => c.header.stamp.as_ns(),
-        }
-    }
 }
 
 /// Decodes an image message (raw or compressed) from `path`.
@@ -46,9 +40,9 @@ pub fn frame(path: &Path, m: &RawMessage) -> Result<Frame> {
         (Serialization::Cdr, true) => CompressedImage::from_cdr(&m.data)
             .map(Frame::Compressed)
             .map_err(|e| e.to_string()),
-        (Serialization::Ros1, false) => crate::ros1::decode::image(&m.data).map(Frame::Raw),
+        (Serialization::Ros1, false) => text(crate::ros1::decode::image(&m.data).map(Frame::Raw)),
         (Serialization::Ros1, true) => {
-            crate::ros1::decode::compressed_image(&m.data).map(Frame::Compressed)
+            text(crate::ros1::decode::compressed_image(&m.data).map(Frame::Compressed))
         }
     };
     wrap(path, m, r)
@@ -58,7 +52,7 @@ pub fn frame(path: &Path, m: &RawMessage) -> Result<Frame> {
 pub fn joint_state(path: &Path, m: &RawMessage) -> Result<JointState> {
     let r = match m.serialization {
         Serialization::Cdr => JointState::from_cdr(&m.data).map_err(|e| e.to_string()),
-        Serialization::Ros1 => crate::ros1::decode::joint_state(&m.data),
+        Serialization::Ros1 => text(crate::ros1::decode::joint_state(&m.data)),
     };
     wrap(path, m, r)
 }
@@ -67,7 +61,7 @@ pub fn joint_state(path: &Path, m: &RawMessage) -> Result<JointState> {
 pub fn pose_stamped(path: &Path, m: &RawMessage) -> Result<PoseStamped> {
     let r = match m.serialization {
         Serialization::Cdr => PoseStamped::from_cdr(&m.data).map_err(|e| e.to_string()),
-        Serialization::Ros1 => crate::ros1::decode::pose_stamped(&m.data),
+        Serialization::Ros1 => text(crate::ros1::decode::pose_stamped(&m.data)),
     };
     wrap(path, m, r)
 }

@@ -14,48 +14,128 @@ use crate::kinematics::ArmKinematics;
 use crate::series::{stamp_of, unwrap_pose_angles, CommandPoses, JointSeries, Ordered};
 use crate::source::{RawMessage, Recording};
 
-/// How to convert. Defaults: the rig's control rate, 320×240 JPEG at quality 90, frames staler
-/// than 1.5 periods invalidate a tick, at most 5 % invalid ticks, header stamps as time,
-/// messages up to 0.1 s out of stamp order put back in order.
+/// How to convert one input, set with chained setters. Defaults: the rig given, else the one
+/// stored in the recording, else one detected; the rig's control rate; 320×240 JPEG at quality
+/// 90; a frame staler than 1.5 of its periods invalidates a tick; at most 5 % invalid ticks;
+/// header stamps as time; messages up to 0.1 s out of stamp order put back in order.
+///
+/// ```
+/// use scaledp_converter::ConvertOptions;
+/// let opts = ConvertOptions::default()
+///     .size(320, 240)
+///     .jpeg_quality(90)
+///     .task("put the cup on the plate")
+///     .topic_override("wrist", "/camera/wrist/image_raw");
+/// # let _ = opts;
+/// ```
+///
+/// The fields are public for the callers that still build the struct literally
+/// (`sim/tests/record_convert.rs`); they become private once none does: use the setters.
 #[derive(Debug, Clone)]
 pub struct ConvertOptions {
     /// Rig to map topics with (else the one stored in the recording, else detected).
+    #[doc(hidden)]
     pub rig: Option<Rig>,
     /// Target rate (Hz); the rig's control rate when None.
+    #[doc(hidden)]
     pub fps: Option<f64>,
     /// Output image width.
+    #[doc(hidden)]
     pub width: u32,
     /// Output image height.
+    #[doc(hidden)]
     pub height: u32,
     /// JPEG quality.
+    #[doc(hidden)]
     pub jpeg_quality: u8,
     /// A camera frame older than this many of its periods invalidates a tick.
+    #[doc(hidden)]
     pub stale_periods: f64,
     /// Largest fraction of invalid ticks an episode may keep.
+    #[doc(hidden)]
     pub max_invalid_fraction: f64,
     /// Task when the recording stores none.
+    #[doc(hidden)]
     pub task: Option<String>,
     /// Align on log (receive) times instead of header stamps.
+    #[doc(hidden)]
     pub use_log_time: bool,
-    /// Convert only messages logged in `[start, end)` (ns): one part of a split recording.
+    /// Convert only messages logged in `[start, end)` (ns): one part of a split recording (set
+    /// by the batch job).
+    #[doc(hidden)]
     pub window_ns: Option<(u64, u64)>,
     /// (name, topic): read camera / arm `name` (or `<arm>_gripper`, `<arm>_command`) from
     /// `topic` instead of the rig's.
+    #[doc(hidden)]
     pub topic_overrides: Vec<(String, String)>,
+    /// How far back (s) a stamp may lie behind one stored before it on its topic and be put
+    /// back in order; further back is a clock jump.
+    #[doc(hidden)]
+    pub reorder_window_s: f64,
 }
 
-/// A message stamped up to this long (ns) before one stored earlier on its topic is put back in
-/// stamp order (and counted); further back is a clock jump, and the episode is refused.
-const REORDER_WINDOW_NS: u64 = 100_000_000;
-
 impl ConvertOptions {
+    /// Maps topics with `rig` (default: the rig stored in the recording, else one detected from
+    /// message types and joint names).
+    pub fn rig(mut self, rig: Rig) -> Self {
+        self.rig = Some(rig);
+        self
+    }
+    /// Ticks at `hz` (default: the rig's control rate).
+    pub fn fps(mut self, hz: f64) -> Self {
+        self.fps = Some(hz);
+        self
+    }
+    /// Stored image size (default 320×240).
+    pub fn size(mut self, width: u32, height: u32) -> Self {
+        self.width = width;
+        self.height = height;
+        self
+    }
+    /// JPEG quality of stored images, 1–100 (default 90).
+    pub fn jpeg_quality(mut self, quality: u8) -> Self {
+        self.jpeg_quality = quality;
+        self
+    }
+    /// A camera frame older than `periods` of its frame periods invalidates a tick (default 1.5).
+    pub fn stale_periods(mut self, periods: f64) -> Self {
+        self.stale_periods = periods;
+        self
+    }
+    /// Largest fraction of invalid ticks inside an episode (default 0.05); more rejects it.
+    pub fn max_invalid_fraction(mut self, fraction: f64) -> Self {
+        self.max_invalid_fraction = fraction;
+        self
+    }
+    /// Task instruction for inputs that store none (bags).
+    pub fn task(mut self, task: impl Into<String>) -> Self {
+        self.task = Some(task.into());
+        self
+    }
+    /// Aligns on log (receive) times instead of header stamps (default false).
+    pub fn use_log_time(mut self, yes: bool) -> Self {
+        self.use_log_time = yes;
+        self
+    }
+    /// Reads camera or arm `name` (or `<arm>_gripper`, `<arm>_command`) from `topic` instead of
+    /// the rig's (repeatable; an unknown name fails the input).
+    pub fn topic_override(mut self, name: impl Into<String>, topic: impl Into<String>) -> Self {
+        self.topic_overrides.push((name.into(), topic.into()));
+        self
+    }
+    /// Messages stamped up to `seconds` before one stored earlier on their topic are put back
+    /// in stamp order and counted (default 0.1); further back is a clock jump.
+    pub fn reorder_window(mut self, seconds: f64) -> Self {
+        self.reorder_window_s = seconds;
+        self
+    }
     /// Whether a message logged at `log_ns` is inside the window converted.
     pub(crate) fn in_window(&self, log_ns: u64) -> bool {
         self.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns))
     }
     /// The reorder window in ns.
     pub(crate) fn reorder_window_ns(&self) -> u64 {
-        REORDER_WINDOW_NS
+        (self.reorder_window_s.max(0.0) * 1e9).min(u64::MAX as f64) as u64
     }
     /// Output size and quality of frames.
     pub(crate) fn encode_spec(&self) -> EncodeSpec {
@@ -81,6 +161,7 @@ impl Default for ConvertOptions {
             use_log_time: false,
             window_ns: None,
             topic_overrides: Vec::new(),
+            reorder_window_s: 0.1,
         }
     }
 }
@@ -123,6 +204,8 @@ pub struct Episode {
     pub cameras: Vec<CameraFrames>,
     /// Output image size (width, height).
     pub image_size: (u32, u32),
+    /// JPEG quality of the frames.
+    pub jpeg_quality: u8,
     /// What alignment measured.
     pub report: AlignmentReport,
     /// `header.stamp` or `log_time`.
@@ -562,6 +645,7 @@ pub fn convert(
         joints,
         cameras,
         image_size: (spec.width, spec.height),
+        jpeg_quality: spec.quality,
         report: aligned.report,
         time_source: if opts.use_log_time {
             "log_time".into()

@@ -60,6 +60,14 @@ impl Error {
             reason: reason.to_string(),
         }
     }
+    /// The error on one line, as a report of failed inputs shows it (a library's message may
+    /// end in a newline or span several).
+    pub fn one_line(&self) -> String {
+        self.to_string()
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
     /// A closure turning an I/O error on `path` into an [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
         let path = path.into();

@@ -266,12 +266,7 @@ mod tests {
     }
 
     fn options() -> ConvertOptions {
-        ConvertOptions {
-            width: 16,
-            height: 12,
-            task: Some("t".into()),
-            ..ConvertOptions::default()
-        }
+        ConvertOptions::default().size(16, 12).task("t")
     }
 
     /// Converts `rec` as read from `path` (rig detected): the result does not matter, only
@@ -305,10 +300,7 @@ mod tests {
         // file streams past.
         let good = corpus().join("good_standalone.mcap");
         let rec = crate::read_mcap(&good, &all).unwrap();
-        let with_rig = ConvertOptions {
-            rig: Some(crate::detect::detect(&good, &rec, 10.0).unwrap()),
-            ..options()
-        };
+        let with_rig = options().rig(crate::detect::detect(&good, &rec, 10.0).unwrap());
         check(run("mcap", &seeds, iterations(), &mut |data| {
             std::fs::write(&file, data).unwrap();
             // The streaming reader, every payload decoded (deferred tails too).

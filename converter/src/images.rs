@@ -1,4 +1,7 @@
-//! Camera frames → RGB → resized → JPEG, plus the per-channel statistics LeRobot keeps.
+//! Camera frames → RGB → resized → JPEG, plus the per-channel statistics LeRobot keeps: the
+//! image path of the converter (and of [`crate::live`]). Raw `sensor_msgs/Image` pixels in
+//! bgra8, bgr8, rgb8, rgba8 or mono8 (honouring `step`) or a JPEG/PNG `CompressedImage`, resized
+//! with a Lanczos3 convolution, encoded as baseline JPEG.
 
 use std::path::Path;
 
@@ -8,6 +11,60 @@ use scaledp_schema::{CdrReader, RosMessage};
 
 use crate::decode::Frame;
 use crate::error::{Error, Result};
+
+/// Why a camera frame could not become RGB or JPEG.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    /// The `sensor_msgs/Image` CDR payload is malformed.
+    #[error(transparent)]
+    Cdr(#[from] scaledp_schema::Error),
+    /// A pixel encoding the converter does not read (e.g. `16UC1`, `yuv422`).
+    #[error("unsupported image encoding '{0}'")]
+    Encoding(String),
+    /// No pixels: a zero width or height.
+    #[error("empty image {width}×{height}")]
+    Empty {
+        /// Columns.
+        width: u32,
+        /// Rows.
+        height: u32,
+    },
+    /// Width, height, `step` and the data length do not fit together.
+    #[error("{encoding} image {width}×{height}: {problem}")]
+    Layout {
+        /// Pixel encoding.
+        encoding: String,
+        /// Columns.
+        width: u32,
+        /// Rows.
+        height: u32,
+        /// What does not fit, e.g. "3000 data bytes, but 24 rows of step 128 need 3072".
+        problem: String,
+    },
+    /// A compressed frame that could not be decoded.
+    #[error("{format} image: {reason}")]
+    Compressed {
+        /// The message's `format`, e.g. `jpeg`, `png`.
+        format: String,
+        /// The decoder's reason.
+        reason: String,
+    },
+    /// Resizing failed (sizes the resizer refuses).
+    #[error("resize: {0}")]
+    Resize(String),
+    /// JPEG encoding failed (a side above 65535, …).
+    #[error("jpeg: {0}")]
+    Jpeg(String),
+}
+
+/// Kept for callers that report errors as text.
+impl From<ImageError> for String {
+    fn from(e: ImageError) -> Self {
+        e.to_string()
+    }
+}
+
+type ImageResult<T> = std::result::Result<T, ImageError>;
 use crate::resample::{lanczos3, reorder, with_resizer};
 use crate::source::{RawMessage, Serialization};
 
@@ -48,15 +105,15 @@ pub struct ImageView<'a> {
 
 impl<'a> ImageView<'a> {
     /// Parses a CDR `sensor_msgs/msg/Image` payload without copying its pixels.
-    pub fn from_cdr(payload: &'a [u8]) -> Result<Self, String> {
-        let mut r = CdrReader::new(payload).map_err(|e| e.to_string())?;
-        Header::read(&mut r).map_err(|e| e.to_string())?;
-        let height = r.u32().map_err(|e| e.to_string())?;
-        let width = r.u32().map_err(|e| e.to_string())?;
-        let encoding = r.str().map_err(|e| e.to_string())?;
-        r.u8().map_err(|e| e.to_string())?;
-        let step = r.u32().map_err(|e| e.to_string())?;
-        let data = r.bytes().map_err(|e| e.to_string())?;
+    pub fn from_cdr(payload: &'a [u8]) -> ImageResult<Self> {
+        let mut r = CdrReader::new(payload)?;
+        Header::read(&mut r)?;
+        let height = r.u32()?;
+        let width = r.u32()?;
+        let encoding = r.str()?;
+        r.u8()?;
+        let step = r.u32()?;
+        let data = r.bytes()?;
         Ok(Self {
             width,
             height,
@@ -67,54 +124,62 @@ impl<'a> ImageView<'a> {
     }
 
     /// (bytes per pixel, source index of R, G, B) of the encoding.
-    fn layout(&self) -> Result<(usize, [usize; 3]), String> {
+    fn layout(&self) -> ImageResult<(usize, [usize; 3])> {
         Ok(match self.encoding {
             "rgb8" => (3, [0, 1, 2]),
             "bgr8" => (3, [2, 1, 0]),
             "rgba8" => (4, [0, 1, 2]),
             "bgra8" => (4, [2, 1, 0]),
             "mono8" => (1, [0, 0, 0]),
-            other => return Err(format!("unsupported image encoding '{other}'")),
+            other => return Err(ImageError::Encoding(other.into())),
         })
     }
 
     /// Checks the size, step and data length; returns the layout. Sizes come from the message,
     /// so every product is checked (a 4294967295-square image overflows 64 bits).
-    fn check(&self) -> Result<(usize, [usize; 3]), String> {
+    fn check(&self) -> ImageResult<(usize, [usize; 3])> {
         let (channels, order) = self.layout()?;
         let (w, h, step) = (
             self.width as usize,
             self.height as usize,
             self.step as usize,
         );
-        let what = format!("{} image {w}×{h}", self.encoding);
         if w == 0 || h == 0 {
-            return Err(format!("empty image {w}×{h}"));
+            return Err(ImageError::Empty {
+                width: self.width,
+                height: self.height,
+            });
         }
+        let bad = |problem: String| ImageError::Layout {
+            encoding: self.encoding.into(),
+            width: self.width,
+            height: self.height,
+            problem,
+        };
         let row = w
             .checked_mul(channels)
-            .ok_or_else(|| format!("{what}: absurd width"))?;
+            .ok_or_else(|| bad("absurd width".into()))?;
         if step < row {
-            return Err(format!(
-                "{what}: step {step} is smaller than width {w} × {channels} bytes"
-            ));
+            return Err(bad(format!(
+                "step {step} is smaller than width {w} × {channels} bytes"
+            )));
         }
         let needed = step
             .checked_mul(h - 1)
             .and_then(|b| b.checked_add(row))
-            .ok_or_else(|| format!("{what}: absurd size (step {step})"))?;
+            .ok_or_else(|| bad(format!("absurd size (step {step})")))?;
         if self.data.len() < needed {
-            return Err(format!(
-                "{what}: {} data bytes, but {h} rows of step {step} need {needed}",
+            return Err(bad(format!(
+                "{} data bytes, but {h} rows of step {step} need {needed}",
                 self.data.len()
-            ));
+            )));
         }
         Ok((channels, order))
     }
 }
 
 /// Decodes a raw image to RGB, honouring `step` (row padding).
-pub fn view_to_rgb(img: &ImageView<'_>) -> Result<Rgb, String> {
+pub fn view_to_rgb(img: &ImageView<'_>) -> ImageResult<Rgb> {
     let (channels, order) = img.check()?;
     let (w, h) = (img.width as usize, img.height as usize);
     let mut out = Vec::with_capacity(w * h * 3);
@@ -134,7 +199,7 @@ pub fn view_to_rgb(img: &ImageView<'_>) -> Result<Rgb, String> {
 /// resized as stored (alpha ignored, never premultiplied) and only the small result is
 /// reordered to RGB: the same pixels as [`view_to_rgb`] then [`resize`], without converting the
 /// full-size frame.
-pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> Result<Rgb, String> {
+pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> ImageResult<Rgb> {
     let (channels, order) = img.check()?;
     let (w, h) = (img.width, img.height);
     let packed = img.step as usize == w as usize * channels;
@@ -148,12 +213,13 @@ pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> Result<Rgb, 
     }
     let bytes = img.step as usize * h as usize;
     let from = fr::images::ImageRef::new(w, h, &img.data[..bytes], pixel)
-        .map_err(|e| format!("resize: {e}"))?;
+        .map_err(|e| ImageError::Resize(e.to_string()))?;
     let mut to = fr::images::Image::new(width, height, pixel);
     let options = fr::ResizeOptions::new()
         .resize_alg(fr::ResizeAlg::Convolution(lanczos3()))
         .use_alpha(false);
-    with_resizer(|r| r.resize(&from, &mut to, &options)).map_err(|e| format!("resize: {e}"))?;
+    with_resizer(|r| r.resize(&from, &mut to, &options))
+        .map_err(|e| ImageError::Resize(e.to_string()))?;
     let mut data = vec![0; width as usize * height as usize * 3];
     match (channels, order) {
         (4, [2, 1, 0]) => reorder::<4, 2, 1, 0>(to.buffer(), &mut data),
@@ -169,7 +235,7 @@ pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> Result<Rgb, 
 }
 
 /// Resized RGB → JPEG and histogram.
-fn finish(small: &Rgb, spec: &EncodeSpec) -> Result<EncodedFrame, String> {
+fn finish(small: &Rgb, spec: &EncodeSpec) -> ImageResult<EncodedFrame> {
     let jpeg = jpeg(small, spec.quality)?;
     let mut histogram = ChannelHistogram::default();
     histogram.add(small);
@@ -187,11 +253,11 @@ pub fn encode_message(
     data: &[u8],
     spec: &EncodeSpec,
 ) -> Result<EncodedFrame> {
-    let err = |reason: String| Error::Message {
+    let err = |e: ImageError| Error::Message {
         path: path.into(),
         topic: topic.into(),
         log_time_ns,
-        reason,
+        reason: e.to_string(),
     };
     let compressed = message_type.ends_with("/CompressedImage");
     if serialization == Serialization::Cdr && !compressed {
@@ -224,7 +290,7 @@ pub struct Rgb {
 }
 
 /// Decodes a frame to RGB, honouring `step` (row padding) for raw images.
-pub fn to_rgb(frame: &Frame) -> Result<Rgb, String> {
+pub(crate) fn to_rgb(frame: &Frame) -> ImageResult<Rgb> {
     match frame {
         Frame::Raw(img) => view_to_rgb(&ImageView {
             width: img.width,
@@ -234,7 +300,10 @@ pub fn to_rgb(frame: &Frame) -> Result<Rgb, String> {
             data: &img.data,
         }),
         Frame::Compressed(c) => {
-            let img = decode_compressed(&c.data).map_err(|e| format!("{} image: {e}", c.format))?;
+            let img = decode_compressed(&c.data).map_err(|reason| ImageError::Compressed {
+                format: c.format.clone(),
+                reason,
+            })?;
             let rgb = img.to_rgb8();
             Ok(Rgb {
                 width: rgb.width(),
@@ -266,15 +335,16 @@ fn decode_compressed(data: &[u8]) -> Result<image::DynamicImage, String> {
 }
 
 /// Resizes with a Lanczos3 convolution (antialiased when shrinking); a no-op at the same size.
-pub fn resize(src: &Rgb, width: u32, height: u32) -> Result<Rgb, String> {
+pub fn resize(src: &Rgb, width: u32, height: u32) -> ImageResult<Rgb> {
     if src.width == width && src.height == height {
         return Ok(src.clone());
     }
     let from = fr::images::ImageRef::new(src.width, src.height, &src.data, fr::PixelType::U8x3)
-        .map_err(|e| format!("resize: {e}"))?;
+        .map_err(|e| ImageError::Resize(e.to_string()))?;
     let mut to = fr::images::Image::new(width, height, fr::PixelType::U8x3);
     let options = fr::ResizeOptions::new().resize_alg(fr::ResizeAlg::Convolution(lanczos3()));
-    with_resizer(|r| r.resize(&from, &mut to, &options)).map_err(|e| format!("resize: {e}"))?;
+    with_resizer(|r| r.resize(&from, &mut to, &options))
+        .map_err(|e| ImageError::Resize(e.to_string()))?;
     Ok(Rgb {
         width,
         height,
@@ -283,16 +353,21 @@ pub fn resize(src: &Rgb, width: u32, height: u32) -> Result<Rgb, String> {
 }
 
 /// Encodes RGB as baseline JPEG at `quality` (1–100).
-pub fn jpeg(src: &Rgb, quality: u8) -> Result<Vec<u8>, String> {
+pub fn jpeg(src: &Rgb, quality: u8) -> ImageResult<Vec<u8>> {
     let mut out = Vec::with_capacity(src.data.len() / 8);
     let encoder = jpeg_encoder::Encoder::new(&mut out, quality.clamp(1, 100));
-    let (w, h) = (
-        u16::try_from(src.width).map_err(|_| "image too wide for JPEG")?,
-        u16::try_from(src.height).map_err(|_| "image too tall for JPEG")?,
-    );
+    let side = |v: u32| {
+        u16::try_from(v).map_err(|_| {
+            ImageError::Jpeg(format!(
+                "{}×{} is beyond 65535 a side",
+                src.width, src.height
+            ))
+        })
+    };
+    let (w, h) = (side(src.width)?, side(src.height)?);
     encoder
         .encode(&src.data, w, h, jpeg_encoder::ColorType::Rgb)
-        .map_err(|e| format!("jpeg: {e}"))?;
+        .map_err(|e| ImageError::Jpeg(e.to_string()))?;
     Ok(out)
 }
 
@@ -411,15 +486,13 @@ mod tests {
         assert_eq!(rgb.data, vec![3, 2, 1, 6, 5, 4, 9, 8, 7, 12, 11, 10]);
         let mono = to_rgb(&raw("mono8", 2, 1, 2, vec![5, 6])).unwrap();
         assert_eq!(mono.data, vec![5, 5, 5, 6, 6, 6]);
-        assert!(to_rgb(&raw("rgb8", 2, 2, 5, vec![0; 12]))
-            .unwrap_err()
-            .contains("step 5"));
-        assert!(to_rgb(&raw("rgb8", 2, 2, 6, vec![0; 11]))
-            .unwrap_err()
-            .contains("need 12"));
-        assert!(to_rgb(&raw("16UC1", 2, 2, 4, vec![0; 8]))
-            .unwrap_err()
-            .contains("16UC1"));
+        let e = |f: Frame| to_rgb(&f).unwrap_err().to_string();
+        assert!(e(raw("rgb8", 2, 2, 5, vec![0; 12])).contains("step 5"));
+        assert!(e(raw("rgb8", 2, 2, 6, vec![0; 11])).contains("need 12"));
+        assert!(matches!(
+            to_rgb(&raw("16UC1", 2, 2, 4, vec![0; 8])),
+            Err(ImageError::Encoding(enc)) if enc == "16UC1"
+        ));
     }
 
     #[test]

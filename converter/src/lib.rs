@@ -1,20 +1,43 @@
 //! The converter: MCAP recordings, ros2 MCAP files, rosbag2 directories (mcap or sqlite3) and
 //! ROS 1 bags → LeRobot v3.0 datasets with time-aligned frames, resized JPEG images, proprio
 //! state and 6D end-effector pose actions computed by forward kinematics.
+//!
+//! # The API
+//!
+//! - **A batch job**: [`collect_inputs`] expands paths into inputs, [`run`] converts them into
+//!   a dataset ([`JobOptions`], [`Progress`] events, one [`InputResult`] per input), [`merge`]
+//!   joins datasets, [`shard`] and [`content_hash`] are what `--shard` and resuming use.
+//! - **One input**: [`read_input`] (or [`read_mcap`], [`read_ros1_bag`], [`read_rosbag2`])
+//!   reads a [`Recording`]; [`convert`] turns it into an [`Episode`] with [`ConvertOptions`],
+//!   its frames from a [`FrameStore`] ([`InMemory`] for a recording read whole).
+//! - **What a dataset records**: [`Sidecar`] (`meta/scaledp.json`) and its [`EpisodeRecord`]s
+//!   with their [`Stats`] and [`AlignmentReport`]; [`align`] is the alignment itself.
+//! - **A deployment node** builds its observations with [`live`]: the same frame pick rule,
+//!   joint interpolation, kinematics ([`live::ArmKinematics`], on [`UrdfChain`]s for URDF rigs)
+//!   and image path ([`images`]) as the converter, so a policy sees at run time what it was
+//!   trained on.
+//! - [`ros1::decode`] reads the ROS 1 serialization of the message types the converter uses.
+//!
+//! Every error is an [`Error`] naming the file and what is wrong with it.
 
-pub mod align;
+mod align;
 mod batch;
 mod decode;
 mod detect;
 mod encode_pool;
+// Public only for the paths callers used before the re-exports below
+// (`scaledp_converter::episode::convert` in sim/tests): use the crate root.
+#[doc(hidden)]
 pub mod episode;
 mod error;
+// Public only for old paths (sim/tests) and the prefetch test's diagnostics.
+#[doc(hidden)]
 pub mod frames;
 #[cfg(test)]
 mod fuzz;
 pub mod images;
 mod kinematics;
-pub mod lerobot;
+mod lerobot;
 pub mod live;
 mod lz4;
 mod mcap_source;
@@ -24,16 +47,21 @@ mod resample;
 pub mod ros1;
 mod rosbag2;
 mod series;
-pub mod source;
-pub mod stats;
-pub mod urdf;
+mod source;
+mod stats;
+mod urdf;
 
+pub use align::{align, Alignment, AlignmentReport, Stream, StreamReport};
 pub use batch::{
-    collect_inputs, content_hash, merge, read_input, run, shard, JobOptions, Outcome, Progress,
+    collect_inputs, content_hash, merge, read_input, run, shard, InputResult, JobOptions, Progress,
 };
-pub use episode::{ConvertOptions, Episode};
+pub use episode::{convert, state_names, CameraFrames, ConvertOptions, Episode};
 pub use error::{Error, Result};
+pub use frames::{FrameKey, FrameStore, InMemory};
+pub use lerobot::{EpisodeRecord, Sidecar};
 pub use mcap_source::read_mcap;
 pub use ros1::read_ros1_bag;
 pub use rosbag2::read_rosbag2;
 pub use source::{RawMessage, Recording, Serialization, TopicInfo};
+pub use stats::Stats;
+pub use urdf::UrdfChain;

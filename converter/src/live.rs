@@ -163,14 +163,11 @@ mod tests {
         let mut rig = Rig::builtin("franka_2zed").unwrap();
         rig.cameras.truncate(1);
         let rec = recording(&rig);
-        let opts = ConvertOptions {
-            rig: Some(rig.clone()),
-            task: Some("t".into()),
-            width: 40,
-            height: 30,
-            jpeg_quality: 85,
-            ..ConvertOptions::default()
-        };
+        let opts = ConvertOptions::default()
+            .rig(rig.clone())
+            .task("t")
+            .size(40, 30)
+            .jpeg_quality(85);
         let ep = convert(Path::new("x.mcap"), &rec, &InMemory(&rec), &opts).unwrap();
         assert!(ep.len() > 10);
 

@@ -8,9 +8,8 @@ use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::Path;
 
-use scaledp_converter::episode::{convert, ConvertOptions, Episode};
-use scaledp_converter::frames::{read_mcap_light, FrameStore};
-use scaledp_converter::TopicInfo;
+use scaledp_converter::frames::read_mcap_light;
+use scaledp_converter::{convert, ConvertOptions, Episode, FrameStore, TopicInfo};
 use scaledp_schema::msg::{Header, Image, JointState, Time};
 use scaledp_schema::{Rig, RosMessage};
 
@@ -182,13 +181,10 @@ fn frames_picked_during_the_read_equal_frames_read_again() {
     let path = dir.path().join("episode.mcap");
     let rig = Rig::builtin("franka_2zed").unwrap();
     record(&path, &rig);
-    let opts = ConvertOptions {
-        rig: Some(rig.clone()),
-        width: 160,
-        height: 120,
-        max_invalid_fraction: 0.2,
-        ..ConvertOptions::default()
-    };
+    let unrigged = ConvertOptions::default()
+        .size(160, 120)
+        .max_invalid_fraction(0.2);
+    let opts = unrigged.clone().rig(rig.clone());
     let (reference, none_ahead, all_again) = episode(&path, None, &opts);
     assert_eq!(none_ahead, 0);
     assert!(reference.len() > 15, "{} frames", reference.len());
@@ -211,19 +207,13 @@ fn frames_picked_during_the_read_equal_frames_read_again() {
     );
 
     // The rig found in the file's metadata instead of given.
-    let stored = ConvertOptions {
-        rig: None,
-        ..opts.clone()
-    };
+    let stored = unrigged;
     let (from_metadata, ahead) = episode_with_rig(&path, &stored, &opts);
     same(&from_metadata, &reference);
     assert!(ahead > 0);
 
     // A wrong guess (another rate): the frames it missed are read again.
-    let wrong = ConvertOptions {
-        fps: Some(7.0),
-        ..opts.clone()
-    };
+    let wrong = opts.clone().fps(7.0);
     let (fixed, _, again) = episode(&path, Some(&wrong), &opts);
     same(&fixed, &reference);
     assert!(again > 0);

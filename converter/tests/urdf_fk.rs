@@ -7,8 +7,8 @@ use std::f64::consts::{PI, TAU};
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DMat4, DVec3};
-use scaledp_converter::urdf::UrdfChain;
 use scaledp_converter::Error;
+use scaledp_converter::UrdfChain;
 use scaledp_schema::kinematics::{pose6_from_transform, unwrap_angles, RobotModel};
 
 fn fixture(name: &str) -> PathBuf {

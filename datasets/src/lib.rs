@@ -30,13 +30,40 @@ pub use normalize::{Affine, Norm, Normalizer};
 pub use options::LoaderOptions;
 pub use sampler::{split_episodes, window, Split, Window};
 
-/// Decodes an encoded image (JPEG or PNG) into channel-first RGB of the given size — the
-/// loader's own decoder, for benchmarks that measure the decoding limit.
+/// An encoded image [`decode_image`] could not decode (corrupt, not JPEG or PNG, claiming
+/// absurd dimensions), or a destination of the wrong size.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{reason}")]
+pub struct ImageError {
+    /// What is wrong.
+    pub reason: String,
+}
+
+/// Kept for callers that report errors as text.
+impl From<ImageError> for String {
+    fn from(e: ImageError) -> Self {
+        e.reason
+    }
+}
+
+/// Decodes an encoded image (JPEG or PNG) into `dst`, channel-first RGB of `width` × `height`
+/// (`3 × height × width` bytes; resized bilinearly when the image is another size) — the
+/// loader's own decoder, for benchmarks that measure the decoding limit and for a deployment
+/// node that must see frames as training did.
 pub fn decode_image(
     encoded: &[u8],
     width: u32,
     height: u32,
     dst: &mut [u8],
-) -> std::result::Result<(), String> {
-    decode::decode_into(encoded, width, height, dst)
+) -> std::result::Result<(), ImageError> {
+    let want = 3 * width as usize * height as usize;
+    if dst.len() != want {
+        return Err(ImageError {
+            reason: format!(
+                "destination of {} bytes for {width}×{height} RGB ({want} bytes)",
+                dst.len()
+            ),
+        });
+    }
+    decode::decode_into(encoded, width, height, dst).map_err(|reason| ImageError { reason })
 }

@@ -7,9 +7,9 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use scaledp_sim::synth::write_episode;
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
+use scaledp_sim::synth::write_episode;
 use scaledp_tests::{
     check_dataset, convert_cli, f32_rows, make_bags, scaledp_bin, small_bimanual, small_franka,
     synth_episode, write_rig_file, T0,

@@ -6,8 +6,8 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use scaledp_sim::SimOptions;
 use scaledp_recorder::{net, now_ns};
+use scaledp_sim::SimOptions;
 use scaledp_tests::{free_endpoint, run_python, scaledp_bin, small_franka};
 
 #[test]

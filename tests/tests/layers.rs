@@ -59,7 +59,10 @@ fn rerun_stays_in_the_viewer() {
         "scaledp-recorder",
         "scaledp-sim",
     ] {
-        assert!(!has(&tree(krate, &[]), "rerun "), "{krate} depends on rerun");
+        assert!(
+            !has(&tree(krate, &[]), "rerun "),
+            "{krate} depends on rerun"
+        );
     }
     assert!(has(&tree("scaledp-viewer", &[]), "rerun "));
     assert!(

@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use scaledp_sim::{KeyStyle, SimOptions};
 use scaledp_recorder::{
     net, now_ns, Command, EpisodeReport, Event, Label, Recorder, RecorderOptions,
 };
 use scaledp_schema::msg::{header_stamp, Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
+use scaledp_sim::{KeyStyle, SimOptions};
 use scaledp_tests::{episode_metadata, free_endpoint, run_python, small_bimanual, small_franka};
 use sha2::{Digest, Sha256};
 

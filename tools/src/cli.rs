@@ -310,6 +310,11 @@ pub struct ConvertArgs {
     /// Align on log (receive) times instead of header stamps.
     #[arg(long)]
     pub log_time: bool,
+    /// Put a message back in stamp order when it is stamped up to this long before one stored
+    /// earlier on its topic (a wobbling driver, a second publisher); further back is a clock jump
+    /// and the episode is rejected.
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.1)]
+    pub reorder_window: f64,
     /// Convert only slice I of N of the sorted inputs (e.g. $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT).
     #[arg(long, value_name = "I/N", value_parser = parse_shard)]
     pub shard: Option<(usize, usize)>,
@@ -319,9 +324,10 @@ pub struct ConvertArgs {
     /// Rebuild the dataset from scratch instead of skipping inputs already converted.
     #[arg(long)]
     pub overwrite: bool,
-    /// Target size of each data file (MB).
-    #[arg(long, default_value_t = 100)]
-    pub file_size_mb: u64,
+    /// Target size of each data file (MiB; LeRobot's `data_files_size_in_mb`, which LeRobot
+    /// measures in MiB too).
+    #[arg(long, alias = "file-size-mb", default_value_t = 100)]
+    pub file_size_mib: u64,
     /// Convert episodes recorded with outcome `failure` too.
     #[arg(long)]
     pub include_failures: bool,
@@ -374,9 +380,9 @@ pub enum DatasetCommand {
         /// The merged dataset (replaced if it exists).
         #[arg(long)]
         out: PathBuf,
-        /// Target size of each data file (MB).
-        #[arg(long, default_value_t = 100)]
-        file_size_mb: u64,
+        /// Target size of each data file (MiB).
+        #[arg(long, alias = "file-size-mb", default_value_t = 100)]
+        file_size_mib: u64,
     },
 }
 
@@ -401,6 +407,9 @@ pub struct DemoArgs {
     /// Samples per batch of the loader epoch at the end.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..))]
     pub batch_size: u64,
+    /// Steps of the short ScaleDP-Ti training run at the end (0: stop after the loader).
+    #[arg(long, default_value_t = 30)]
+    pub train_steps: u64,
 }
 
 /// `scaledp view`.

@@ -5,9 +5,9 @@
 
 use glam::{DMat4, DVec3};
 use rerun::{LineStrips3D, RecordingStream, Transform3D, TransformAxes3D};
-use scaledp_converter::urdf::UrdfChain;
-use scaledp_schema::kinematics::rotation_from_rpy;
+use scaledp_converter::live::ArmKinematics;
 use scaledp_schema::rig::Arm;
+use scaledp_schema::RobotModel;
 
 use crate::error::{Error, Result};
 use crate::layout;
@@ -19,64 +19,45 @@ const LINK_AXES_M: f32 = 0.04;
 /// Bases of several arms, side by side along y (a rig names no base placement).
 const ARM_SPACING_M: f64 = 0.8;
 
-enum Fk {
-    Builtin(scaledp_schema::RobotModel),
-    Urdf(UrdfChain),
-}
-
 /// One arm's kinematics and where it is drawn.
 pub(crate) struct ArmModel {
     name: String,
-    fk: Fk,
-    flange_from_tcp: DMat4,
-    /// Joint positions this arm takes, in order.
-    pub dof: usize,
+    /// Base → TCP, exactly as the converter computes the state's pose.
+    tcp: ArmKinematics,
+    /// The built-in model's link frames (none for a URDF chain: base → TCP only).
+    links: Option<RobotModel>,
+    /// Joint positions this arm takes.
+    dof: usize,
 }
 
 impl ArmModel {
     /// The model of `arm` (its URDF is read when it names one).
     pub fn new(arm: &Arm) -> Result<Self> {
-        let flange_from_tcp = match arm.tcp_xyz_rpy {
-            Some([x, y, z, r, p, yaw]) => {
-                DMat4::from_translation(DVec3::new(x, y, z))
-                    * DMat4::from_mat3(rotation_from_rpy([r, p, yaw]))
-            }
-            None if arm.urdf.is_some() => DMat4::IDENTITY,
-            None => arm.model.default_flange_from_tcp(),
-        };
-        let fk = match &arm.urdf {
-            Some(u) => Fk::Urdf(UrdfChain::from_file(&u.path, &u.base_link, &u.tip_link)?),
-            None => Fk::Builtin(arm.model),
-        };
-        let dof = match &fk {
-            Fk::Builtin(m) => m.dof(),
-            Fk::Urdf(c) => c.joint_names().len(),
-        };
         Ok(Self {
             name: arm.name.clone(),
-            fk,
-            flange_from_tcp,
-            dof,
+            tcp: ArmKinematics::new(arm)?,
+            links: arm.urdf.is_none().then_some(arm.model),
+            dof: arm.joint_names.len(),
         })
     }
 
-    /// `base_from_frame` of every link frame, base → flange (a URDF chain gives its tip only).
-    pub fn frames(&self, q: &[f64]) -> Result<Vec<DMat4>> {
-        let bad = |e: String| Error::input(format!("arm '{}'", self.name), e);
-        match &self.fk {
-            Fk::Builtin(m) => m.frames(q).map_err(|e| bad(e.to_string())),
-            Fk::Urdf(c) => c
-                .base_from_tip(q)
-                .map(|t| vec![t])
-                .map_err(|e| bad(e.to_string())),
+    /// `base_from_frame` of every link frame, base → flange (none for a URDF chain).
+    fn frames(&self, q: &[f64]) -> Result<Vec<DMat4>> {
+        match self.links {
+            Some(m) => m
+                .frames(q)
+                .map_err(|e| Error::input(format!("arm '{}'", self.name), e)),
+            None => Ok(Vec::new()),
         }
     }
 
     /// Logs the links, chain and TCP for joint positions `q` at the stream's current time.
     pub fn log_pose(&self, rec: &RecordingStream, q: &[f64]) -> Result<()> {
         let frames = self.frames(q)?;
-        let flange = frames.last().copied().unwrap_or(DMat4::IDENTITY);
-        let tcp = flange * self.flange_from_tcp;
+        let tcp = self
+            .tcp
+            .base_from_tcp(q)
+            .map_err(|e| Error::input(format!("arm '{}'", self.name), e))?;
         let mut points = vec![[0.0f32; 3]];
         points.extend(frames.iter().map(|f| point(f.w_axis.truncate())));
         points.push(point(tcp.w_axis.truncate()));
@@ -106,7 +87,7 @@ impl ArmModel {
         .map_err(r)?;
         rec.log_static(layout::tcp(&self.name), &TransformAxes3D::new(TCP_AXES_M))
             .map_err(r)?;
-        let links = self.frames(&vec![0.0; self.dof]).map_or(1, |f| f.len());
+        let links = self.frames(&vec![0.0; self.dof]).map_or(0, |f| f.len());
         for k in 1..=links {
             rec.log_static(
                 layout::link(&self.name, k),

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use parquet::arrow::arrow_reader::{ParquetRecordBatchReaderBuilder, RowSelection, RowSelector};
 use parquet::arrow::ProjectionMask;
 use rerun::{RecordingStream, TextLog};
-use scaledp_converter::lerobot::Sidecar;
+use scaledp_converter::Sidecar;
 use scaledp_datasets::DatasetFiles;
 use scaledp_schema::rig::Rig;
 use serde::Deserialize;

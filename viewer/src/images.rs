@@ -60,7 +60,7 @@ fn rgb_frame(rgb: Rgb) -> Frame {
 pub(crate) fn raw_frame(view: &ImageView<'_>, max_width: Option<u32>) -> Result<Frame, String> {
     let (w, h) = shown_size(view.width, view.height, max_width);
     if (w, h) != (view.width, view.height) {
-        return resized_rgb(view, w, h).map(rgb_frame);
+        return resized_rgb(view, w, h).map(rgb_frame).map_err(String::from);
     }
     let (model, channels) = match view.encoding {
         "rgb8" => (ColorModel::RGB, 3),
@@ -74,7 +74,7 @@ pub(crate) fn raw_frame(view: &ImageView<'_>, max_width: Option<u32>) -> Result<
     let bytes = row * view.height as usize;
     if view.step as usize != row || view.data.len() < bytes {
         // Padded rows (or a short buffer, which view_to_rgb reports): repack as RGB.
-        return view_to_rgb(view).map(rgb_frame);
+        return view_to_rgb(view).map(rgb_frame).map_err(String::from);
     }
     Ok(Frame::Raw(Image::from_color_model_and_bytes(
         view.data[..bytes].to_vec(),
@@ -138,11 +138,11 @@ pub(crate) fn message_frame(
     match (serialization, compressed) {
         (Serialization::Cdr, false) => {
             let stamp = scaledp_schema::msg::header_stamp(data).map_or(0, |t| t.as_ns());
-            let view = ImageView::from_cdr(data)?;
+            let view = ImageView::from_cdr(data).map_err(String::from)?;
             Ok((stamp, raw_frame(&view, max_width)?))
         }
         (Serialization::Ros1, false) => {
-            let img = scaledp_converter::ros1::decode::image(data)?;
+            let img = scaledp_converter::ros1::decode::image(data).map_err(|e| e.to_string())?;
             Ok((img.header.stamp.as_ns(), owned_raw(&img, max_width)?))
         }
         (Serialization::Cdr, true) => {
@@ -150,7 +150,8 @@ pub(crate) fn message_frame(
             Ok((c.header.stamp.as_ns(), encoded_frame(&c.data, max_width)?))
         }
         (Serialization::Ros1, true) => {
-            let c = scaledp_converter::ros1::decode::compressed_image(data)?;
+            let c = scaledp_converter::ros1::decode::compressed_image(data)
+                .map_err(|e| e.to_string())?;
             Ok((c.header.stamp.as_ns(), encoded_frame(&c.data, max_width)?))
         }
     }

@@ -53,12 +53,14 @@ mod layout;
 mod live;
 mod mcap_read;
 mod recording;
+mod runs;
 mod session;
 mod sink;
 mod ticks;
 
 pub use error::{Error, Result};
 pub use input::{classify, InputKind};
-pub use live::{LiveOptions, RecordView, RolloutView, TopicFigures, TrainingView};
+pub use live::{LiveOptions, RecordView, TopicFigures};
+pub use runs::{RolloutView, TrainingView};
 pub use session::{view, Shown, Summary, ViewOptions, Viewer};
 pub use sink::{Target, APPLICATION_ID};

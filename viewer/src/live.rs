@@ -1,22 +1,18 @@
-//! Live streams for the other commands: what `scaledp record --view` is recording
-//! ([`RecordView`]), a training run's curves ([`TrainingView`], for `train --view`) and policy
-//! rollouts with their predicted chunks ([`RolloutView`], for `eval --view` / `predict --view`).
-//! Each opens its own recording at a [`Target`] and never blocks its caller for long: the
-//! recorder's Zenoh callbacks hand messages to a worker thread through a small queue and
-//! skip frames rather than wait.
+//! What `scaledp record --view` is recording, live ([`RecordView`]): the recorder's Zenoh
+//! callbacks hand messages to a worker thread through a small queue and skip frames rather than
+//! wait, so the view never slows the recorder. [`Own`] is the one-recording sink the live views
+//! (this one and those of [`crate::runs`]) share.
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 
-use rerun::{RecordingStream, Scalars, SeriesLines, TextLog};
+use rerun::{RecordingStream, Scalars, TextLog};
 use scaledp_converter::Serialization;
 use scaledp_schema::rig::{Rig, TopicSpec};
 
-use crate::arm::{xyz_strip, ArmModel};
 use crate::error::{Error, Result};
-use crate::images::{raw_frame, Frame};
 use crate::layout;
 use crate::recording::Collector;
 use crate::sink::{Sink, Target};
@@ -24,7 +20,7 @@ use crate::sink::{Sink, Target};
 /// Messages waiting for the live worker; more are skipped.
 const QUEUE: usize = 32;
 
-fn now_ns() -> u64 {
+pub(crate) fn now_ns() -> u64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos() as u64)
@@ -32,13 +28,13 @@ fn now_ns() -> u64 {
 
 /// A recording stream on its own sink, finished with it (dropped unfinished: a partial file is
 /// removed).
-struct Own {
+pub(crate) struct Own {
     rec: Option<RecordingStream>,
     sink: Option<Sink>,
 }
 
 impl Own {
-    fn open(target: &Target, id: &str, name: &str) -> Result<Self> {
+    pub fn open(target: &Target, id: &str, name: &str) -> Result<Self> {
         let sink = Sink::open(target)?;
         let rec = sink.stream(id, name)?;
         rec.set_log_tick_enabled(false);
@@ -48,12 +44,12 @@ impl Own {
             sink: Some(sink),
         })
     }
-    fn rec(&self) -> Result<&RecordingStream> {
+    pub fn rec(&self) -> Result<&RecordingStream> {
         self.rec
             .as_ref()
             .ok_or_else(|| Error::Rerun("the view is finished".into()))
     }
-    fn finish(mut self) -> Result<Option<PathBuf>> {
+    pub fn finish(mut self) -> Result<Option<PathBuf>> {
         match (self.sink.take(), self.rec.take()) {
             (Some(sink), Some(rec)) => sink.finish(vec![rec]),
             _ => Err(Error::Rerun("the view is finished".into())),
@@ -350,182 +346,4 @@ fn log_status(
         .map_err(r)?;
     }
     rec.log("recorder/mb_per_s", &Scalars::new([mb])).map_err(r)
-}
-
-/// A training run's curves on a `step` timeline (for `scaledp train --view`).
-///
-/// ```no_run
-/// # fn main() -> scaledp_viewer::Result<()> {
-/// use scaledp_viewer::{Target, TrainingView};
-/// let view = TrainingView::start(&Target::Spawn, "scaledp-s cups")?;
-/// for step in 0..1000u64 {
-///     view.log_step(step, 0.1, 1e-4)?;
-/// }
-/// view.log_validation(1000, "action_mse", 0.02)?;
-/// view.finish()?;
-/// # Ok(()) }
-/// ```
-pub struct TrainingView {
-    own: Own,
-}
-
-impl TrainingView {
-    /// Opens a recording named `run` at `target`.
-    pub fn start(target: &Target, run: &str) -> Result<Self> {
-        let own = Own::open(
-            target,
-            &format!("train-{run}-{}", now_ns()),
-            &format!("train: {run}"),
-        )?;
-        own.rec()?
-            .log_static("train/loss", &SeriesLines::new().with_names(["loss"]))
-            .map_err(Error::rerun)?;
-        Ok(Self { own })
-    }
-
-    /// The training loss and learning rate at `step` (`train/loss`, `train/lr`).
-    pub fn log_step(&self, step: u64, loss: f64, lr: f64) -> Result<()> {
-        self.log_scalar(step, "train/loss", loss)?;
-        self.log_scalar(step, "train/lr", lr)
-    }
-
-    /// A validation figure at `step` (`val/<name>`, e.g. `val/loss`, `val/action_mse`).
-    pub fn log_validation(&self, step: u64, name: &str, value: f64) -> Result<()> {
-        self.log_scalar(step, &format!("val/{name}"), value)
-    }
-
-    /// Any scalar at `step` under `entity`.
-    pub fn log_scalar(&self, step: u64, entity: &str, value: f64) -> Result<()> {
-        let rec = self.own.rec()?;
-        rec.set_time_sequence(layout::STEP, step as i64);
-        rec.log(entity, &Scalars::new([value]))
-            .map_err(Error::rerun)
-    }
-
-    /// Flushes; returns the `.rrd` written with [`Target::Save`].
-    pub fn finish(self) -> Result<Option<PathBuf>> {
-        self.own.finish()
-    }
-}
-
-/// Policy rollouts (for `scaledp eval --view` / `predict --view`): camera images, the state,
-/// the action executed and each predicted chunk, per arm in 3-D, on `step` and `time` timelines.
-pub struct RolloutView {
-    own: Own,
-    rig: Rig,
-    arms: Vec<Option<ArmModel>>,
-}
-
-impl RolloutView {
-    /// Opens a recording named `name` for rollouts of `rig` at `target`.
-    pub fn start(target: &Target, name: &str, rig: &Rig) -> Result<Self> {
-        let own = Own::open(target, &format!("rollout-{name}-{}", now_ns()), name)?;
-        let arms: Vec<Option<ArmModel>> = rig.arms.iter().map(|a| ArmModel::new(a).ok()).collect();
-        let r = Error::rerun;
-        let rec = own.rec()?;
-        rec.log_static(layout::WORLD, &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())
-            .map_err(r)?;
-        for (i, m) in arms.iter().enumerate() {
-            if let Some(m) = m {
-                m.log_static(rec, i, arms.len())?;
-            }
-            for d in layout::POSE_DIMS {
-                rec.log_static(
-                    layout::pose(&rig.arms[i].name, d),
-                    &SeriesLines::new().with_names(["state", "action"]),
-                )
-                .map_err(r)?;
-            }
-        }
-        Ok(Self {
-            own,
-            rig: rig.clone(),
-            arms,
-        })
-    }
-
-    /// Sets the time of what follows: control step and seconds since the rollout began.
-    pub fn set_time(&self, step: u64, time_s: f64) {
-        if let Ok(rec) = self.own.rec() {
-            rec.set_time_sequence(layout::STEP, step as i64);
-            rec.set_duration_secs(layout::TIMESTAMP, time_s);
-        }
-    }
-
-    /// A camera image, packed RGB8 rows (`width × height × 3` bytes).
-    pub fn log_image(&self, camera: &str, rgb: &[u8], width: u32, height: u32) -> Result<()> {
-        let view = scaledp_converter::images::ImageView {
-            width,
-            height,
-            encoding: "rgb8",
-            step: width * 3,
-            data: rgb,
-        };
-        let frame: Frame = raw_frame(&view, None).map_err(|e| Error::input(camera, e))?;
-        frame
-            .log(self.own.rec()?, &layout::camera(camera))
-            .map_err(Error::rerun)
-    }
-
-    /// The state and the action executed (7 per arm, rig order, like a dataset's), and the
-    /// joint positions (rig order, arm joints only) when known, for the 3-D arms.
-    pub fn log_step(&self, state: &[f32], action: &[f32], joints: Option<&[f64]>) -> Result<()> {
-        let r = Error::rerun;
-        let rec = self.own.rec()?;
-        let mut offset = 0;
-        for (i, arm) in self.rig.arms.iter().enumerate() {
-            for (d, dim) in layout::POSE_DIMS.iter().enumerate() {
-                let v = |x: &[f32]| x.get(i * 7 + d).map_or(f64::NAN, |&v| f64::from(v));
-                rec.log(
-                    layout::pose(&arm.name, dim),
-                    &Scalars::new([v(state), v(action)]),
-                )
-                .map_err(r)?;
-            }
-            let n = arm.joint_names.len();
-            if let (Some(q), Some(Some(m))) = (
-                joints.and_then(|j| j.get(offset..offset + n)),
-                self.arms.get(i),
-            ) {
-                m.log_pose(rec, q)?;
-            }
-            offset += n;
-        }
-        Ok(())
-    }
-
-    /// A predicted chunk: `dim` values per step (7 per arm, rig order), drawn per arm as a line
-    /// strip through its positions.
-    pub fn log_chunk(&self, predicted: &[f32], dim: usize) -> Result<()> {
-        if dim == 0 {
-            return Ok(());
-        }
-        let rows: Vec<Vec<f32>> = predicted.chunks(dim).map(<[f32]>::to_vec).collect();
-        for (i, arm) in self.rig.arms.iter().enumerate() {
-            let strip = xyz_strip(&rows, 7 * i);
-            self.own
-                .rec()?
-                .log(
-                    layout::predicted_chunk(&arm.name),
-                    &rerun::LineStrips3D::new([strip])
-                        .with_radii([0.004])
-                        .with_colors([0x1e90ffffu32]),
-                )
-                .map_err(Error::rerun)?;
-        }
-        Ok(())
-    }
-
-    /// A line in the text log (success, failure, reset…).
-    pub fn log_text(&self, text: &str) -> Result<()> {
-        self.own
-            .rec()?
-            .log(layout::LOG, &TextLog::new(text))
-            .map_err(Error::rerun)
-    }
-
-    /// Flushes; returns the `.rrd` written with [`Target::Save`].
-    pub fn finish(self) -> Result<Option<PathBuf>> {
-        self.own.finish()
-    }
 }

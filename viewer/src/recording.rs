@@ -204,7 +204,8 @@ impl<'a> Collector<'a> {
             Route::Arm(_) | Route::Gripper(_) | Route::Topic(_) => {
                 let decoded = match serialization {
                     Serialization::Cdr => JointState::from_cdr(data).map_err(|e| e.to_string()),
-                    Serialization::Ros1 => scaledp_converter::ros1::decode::joint_state(data),
+                    Serialization::Ros1 => scaledp_converter::ros1::decode::joint_state(data)
+                        .map_err(|e| e.to_string()),
                 };
                 if self.keep {
                     self.out.recording.messages.push(raw());

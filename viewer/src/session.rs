@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use rerun::RecordingStream;
-use scaledp_converter::episode::ConvertOptions;
+use scaledp_converter::ConvertOptions;
 use scaledp_schema::rig::Rig;
 
 use crate::dataset::Dataset;
@@ -266,12 +266,10 @@ impl Viewer {
             }
         };
         let mut warnings = recording::warnings(&collected);
-        let convert = ConvertOptions {
-            rig: self.opts.rig.clone().or(rig),
-            task: Some(String::new()),
-            max_invalid_fraction: 1.0,
-            ..ConvertOptions::default()
-        };
+        let mut convert = viewing_options();
+        if let Some(r) = self.opts.rig.clone().or(rig) {
+            convert = convert.rig(r);
+        }
         let shown = crate::ticks::show_episode(&rec, path, &collected, &convert, self.opts.chunk)?;
         warnings.extend(shown.warnings);
         recording::log_warnings(&rec, &warnings, collected.first_ns())?;
@@ -309,15 +307,17 @@ impl Drop for Viewer {
     }
 }
 
+/// The converter's defaults, except that an episode without a task or with many invalid ticks
+/// is still shown (the viewer reports what the converter would reject instead).
+fn viewing_options() -> ConvertOptions {
+    ConvertOptions::default().task("").max_invalid_fraction(1.0)
+}
+
 /// The rig the converter would detect in a bag (for entity names), if any.
 fn detect(path: &Path, bag: &scaledp_converter::Recording) -> Option<Rig> {
-    let opts = ConvertOptions {
-        task: Some(String::new()),
-        max_invalid_fraction: 1.0,
-        ..ConvertOptions::default()
-    };
+    let opts = viewing_options();
     let stamps = crate::ticks::NoPixels::from_recording(bag);
-    scaledp_converter::episode::convert(path, bag, &stamps, &opts)
+    scaledp_converter::convert(path, bag, &stamps, &opts)
         .ok()
         .map(|e| e.rig)
 }

@@ -8,11 +8,10 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
 
 use rerun::{RecordingStream, TextLog};
-use scaledp_converter::align::{align, Stream};
-use scaledp_converter::episode::{convert, ConvertOptions, Episode};
-use scaledp_converter::frames::{FrameKey, FrameStore};
 use scaledp_converter::images::{ChannelHistogram, EncodeSpec, EncodedFrame};
-use scaledp_converter::Recording;
+use scaledp_converter::{
+    align, convert, ConvertOptions, Episode, FrameKey, FrameStore, Recording, Stream,
+};
 use scaledp_schema::rig::Rig;
 use scaledp_schema::EpisodeMetadata;
 
@@ -125,19 +124,19 @@ fn quality(
     }
     let a = align(&cams, &joints, fps, opts.stale_periods, 1.0)?;
     let mut q = Quality::default();
-    for (k, &t) in a.ticks_ns.iter().enumerate() {
+    for &t in &a.ticks_ns {
         let (mut lo, mut hi, mut ok) = (u64::MAX, 0u64, true);
-        for (ci, cam) in cams.iter().enumerate() {
-            let s = cam.stamps_ns[a.frames[k][ci]];
+        for cam in &cams {
+            // The converter's own rules: each camera's frame and whether it is fresh, each
+            // joint stream's samples around the tick and whether the hole is small enough.
+            let (i, fresh) = cam.frame_at(t, opts.stale_periods);
+            let s = cam.stamps_ns[i];
             lo = lo.min(s);
             hi = hi.max(s);
-            ok &= s <= t && t.saturating_sub(s) as f64 * 1e-9 <= opts.stale_periods * cam.period_s;
+            ok &= fresh;
         }
         for j in &joints {
-            let gap = j.bracket(t).map_or(f64::INFINITY, |(i, k, _)| {
-                (j.stamps_ns[k] - j.stamps_ns[i]) as f64 * 1e-9
-            });
-            ok &= gap <= (10.0 * j.period_s).max(0.05);
+            ok &= j.sample_at(t).1;
         }
         q.skew_s.push(if cams.is_empty() {
             0.0

@@ -7,8 +7,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use scaledp_converter::episode::{convert, ConvertOptions};
-use scaledp_converter::frames::InMemory;
+use scaledp_converter::{convert, ConvertOptions, InMemory};
 use scaledp_schema::msg::JointState;
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_viewer::{view, Error, Target, ViewOptions};
@@ -231,11 +230,7 @@ fn a_recording_shows_every_frame_every_joint_state_and_the_converted_episode() {
         .all(|(_, w)| w.len() == 1 && (0.0..=0.08).contains(&w[0])));
 
     // State and action per tick: what the converter computes for this recording.
-    let opts = ConvertOptions {
-        width: 64,
-        height: 48,
-        ..ConvertOptions::default()
-    };
+    let opts = ConvertOptions::default().size(64, 48);
     let ep = convert(&mcap, &src, &InMemory(&src), &opts).unwrap();
     assert_eq!(summary.shown[0].frames, ep.len());
     for (d, dim) in ["x", "y", "z", "roll", "pitch", "yaw", "gripper"]
@@ -318,20 +313,14 @@ fn a_recording_shows_every_frame_every_joint_state_and_the_converted_episode() {
 
 /// Converts `inputs` into a dataset at `out` with the converter library.
 fn convert_dataset(inputs: &[PathBuf], out: &Path) {
-    let opts = scaledp_converter::JobOptions {
-        convert: ConvertOptions {
-            width: 64,
-            height: 48,
-            ..ConvertOptions::default()
-        },
-        jobs: 1,
-        ..scaledp_converter::JobOptions::default()
-    };
+    let opts = scaledp_converter::JobOptions::default()
+        .convert(ConvertOptions::default().size(64, 48))
+        .jobs(1);
     let results = scaledp_converter::run(inputs, out, &opts, &|_| {}).unwrap();
     assert!(
         results
             .iter()
-            .all(|(_, o)| matches!(o, scaledp_converter::Outcome::Converted(_))),
+            .all(|(_, o)| matches!(o, scaledp_converter::InputResult::Converted(_))),
         "{results:?}"
     );
 }

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use scaledp_converter::{ConvertOptions, JobOptions, Outcome};
+use scaledp_converter::{ConvertOptions, InputResult, JobOptions};
 use scaledp_schema::Rig;
 
 use crate::synth::synthesize;
@@ -117,16 +117,15 @@ fn generate(cache: &Path, dir: &Path, spec: &DataSpec) -> Result<()> {
     }
     std::fs::create_dir_all(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
     let jobs = spec.jobs.max(1);
-    let opts = |overwrite: bool| JobOptions {
-        convert: ConvertOptions {
-            rig: Some(rig.clone()),
-            width: WIDTH,
-            height: HEIGHT,
-            ..ConvertOptions::default()
-        },
-        overwrite,
-        jobs,
-        ..JobOptions::default()
+    let opts = |overwrite: bool| {
+        JobOptions::default()
+            .convert(
+                ConvertOptions::default()
+                    .rig(rig.clone())
+                    .size(WIDTH, HEIGHT),
+            )
+            .overwrite(overwrite)
+            .jobs(jobs)
     };
     let progress = bar(spec.episodes as u64, "episodes generated");
     progress.set_message(format!("into {}", dir.display()));
@@ -138,9 +137,9 @@ fn generate(cache: &Path, dir: &Path, spec: &DataSpec) -> Result<()> {
             .with_context(|| format!("converting into {}", dir.display()))?;
         for (path, outcome) in results {
             match outcome {
-                Outcome::Converted(_) => {}
-                Outcome::Skipped(why) => bail!("{}: skipped: {why}", path.display()),
-                Outcome::Failed(line) => bail!("{line}"),
+                InputResult::Converted(_) => {}
+                InputResult::Skipped(why) => bail!("{}: skipped: {why}", path.display()),
+                InputResult::Failed(e) => bail!("{}", e.one_line()),
             }
             std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
         }

@@ -217,7 +217,7 @@ fn decode_chw(jpeg: &[u8]) -> Result<(), String> {
     CHW.with(|buf| {
         let mut buf = buf.borrow_mut();
         buf.resize(3 * WIDTH as usize * HEIGHT as usize, 0);
-        scaledp_datasets::decode_image(jpeg, WIDTH, HEIGHT, &mut buf)
+        scaledp_datasets::decode_image(jpeg, WIDTH, HEIGHT, &mut buf).map_err(String::from)
     })
 }
 

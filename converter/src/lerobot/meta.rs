@@ -54,6 +54,9 @@ pub struct Sidecar {
     pub rig: String,
     /// Image width, height.
     pub image_size: (u32, u32),
+    /// JPEG quality of the images (absent in datasets written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jpeg_quality: Option<u8>,
     /// Camera names, in column order.
     pub cameras: Vec<String>,
     /// Names of state / action dimensions.
@@ -192,6 +195,7 @@ pub fn stage_all(
             "rig": s.rig,
             "fps": s.fps,
             "image_size": [s.image_size.0, s.image_size.1],
+            "jpeg_quality": s.jpeg_quality,
             "action": "absolute end-effector pose of the next tick (the last tick of each episode is dropped): per arm in rig order x, y, z (m), roll, pitch, yaw (rad, ROS R = Rz(yaw)·Ry(pitch)·Rx(roll), unwrapped along the episode), gripper opening (m); observation.state is the same at the current tick",
             "kinematics": "built-in DH models (fr3/panda: modified DH, pose of the Franka Hand TCP — flange + 0.1034 m along z, −45° about z — in fr3_link0; ur5/ur5e: standard DH, pose of tool0 in the DH base frame) unless the rig names a URDF chain or a TCP offset",
             "time_alignment": "ticks at fps on header.stamp capture times, starting a quarter frame period after the latest camera's first frame so synchronised cameras pick the same capture; latest camera frame at or before each tick; joints linearly interpolated",

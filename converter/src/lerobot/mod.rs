@@ -122,19 +122,9 @@ impl Dataset {
         Ok(ds)
     }
 
-    /// The dataset root.
-    pub fn root(&self) -> &Path {
-        &self.root
-    }
-
     /// Committed episodes.
     pub fn episodes(&self) -> &[EpisodeRecord] {
         self.sidecar.as_ref().map_or(&[], |s| &s.episodes)
-    }
-
-    /// The record, once an episode has been committed.
-    pub fn sidecar(&self) -> Option<&Sidecar> {
-        self.sidecar.as_ref()
     }
 
     /// True when an input with this BLAKE3 hash is already in the dataset.
@@ -235,6 +225,11 @@ impl Dataset {
                 "{} fps {:?} images, the dataset has {} fps {:?}",
                 ep.fps, ep.image_size, s.fps, s.image_size
             ))
+        } else if s.jpeg_quality.is_some_and(|q| q != ep.jpeg_quality) {
+            Some(format!(
+                "JPEG quality {}, the dataset has {:?}",
+                ep.jpeg_quality, s.jpeg_quality
+            ))
         } else {
             None
         };
@@ -297,6 +292,7 @@ impl Dataset {
                 robot_type: ep.rig.name.clone(),
                 rig: toml::to_string(&ep.rig).unwrap_or_default(),
                 image_size: ep.image_size,
+                jpeg_quality: Some(ep.jpeg_quality),
                 cameras: ep.cameras.iter().map(|c| c.name.clone()).collect(),
                 state_names: ep.state_names.clone(),
                 joint_names: ep.joint_names.clone(),
@@ -382,6 +378,7 @@ impl Dataset {
                     || s.state_names != o.state_names
                     || s.joint_names != o.joint_names
                     || s.image_size != o.image_size
+                    || s.jpeg_quality != o.jpeg_quality
                     || (s.fps - o.fps).abs() > 1e-9 =>
             {
                 return Err(derr(other, "its features differ from the merged dataset's"));

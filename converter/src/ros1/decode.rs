@@ -10,8 +10,28 @@ use scaledp_schema::msg::{
     CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion, Time,
 };
 
+/// A ROS 1 payload that is not the message it should be: truncated, a length beyond the bytes
+/// left, bytes left over (another type), text that is not UTF-8.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("bad ROS 1 message at byte {offset}: {reason}")]
+pub struct DecodeError {
+    /// Byte offset in the payload.
+    pub offset: usize,
+    /// What is wrong.
+    pub reason: String,
+}
+
+/// Kept for callers that report errors as text.
+impl From<DecodeError> for String {
+    fn from(e: DecodeError) -> Self {
+        e.to_string()
+    }
+}
+
+type Result<T> = std::result::Result<T, DecodeError>;
+
 /// Decodes a ROS 1 `sensor_msgs/Image`.
-pub fn image(data: &[u8]) -> Result<Image, String> {
+pub fn image(data: &[u8]) -> Result<Image> {
     whole(data, |r| {
         Ok(Image {
             header: r.header()?,
@@ -26,7 +46,7 @@ pub fn image(data: &[u8]) -> Result<Image, String> {
 }
 
 /// Decodes a ROS 1 `sensor_msgs/CompressedImage`.
-pub fn compressed_image(data: &[u8]) -> Result<CompressedImage, String> {
+pub fn compressed_image(data: &[u8]) -> Result<CompressedImage> {
     whole(data, |r| {
         Ok(CompressedImage {
             header: r.header()?,
@@ -37,7 +57,7 @@ pub fn compressed_image(data: &[u8]) -> Result<CompressedImage, String> {
 }
 
 /// Decodes a ROS 1 `sensor_msgs/JointState`.
-pub fn joint_state(data: &[u8]) -> Result<JointState, String> {
+pub fn joint_state(data: &[u8]) -> Result<JointState> {
     whole(data, |r| {
         Ok(JointState {
             header: r.header()?,
@@ -50,7 +70,7 @@ pub fn joint_state(data: &[u8]) -> Result<JointState, String> {
 }
 
 /// Decodes a ROS 1 `geometry_msgs/PoseStamped`.
-pub fn pose_stamped(data: &[u8]) -> Result<PoseStamped, String> {
+pub fn pose_stamped(data: &[u8]) -> Result<PoseStamped> {
     whole(data, |r| {
         Ok(PoseStamped {
             header: r.header()?,
@@ -72,17 +92,14 @@ pub fn pose_stamped(data: &[u8]) -> Result<PoseStamped, String> {
 }
 
 /// Runs `f` on a reader over `data` and requires it to consume every byte.
-fn whole<T>(
-    data: &[u8],
-    f: impl FnOnce(&mut Reader<'_>) -> Result<T, String>,
-) -> Result<T, String> {
+fn whole<T>(data: &[u8], f: impl FnOnce(&mut Reader<'_>) -> Result<T>) -> Result<T> {
     let mut r = Reader { buf: data, pos: 0 };
     let value = f(&mut r)?;
     match r.left() {
         0 => Ok(value),
-        n => Err(format!(
+        n => Err(r.err(format!(
             "{n} bytes left over after the message (wrong type?)"
-        )),
+        ))),
     }
 }
 
@@ -97,78 +114,87 @@ impl<'a> Reader<'a> {
         self.buf.len() - self.pos
     }
 
-    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+    fn err(&self, reason: String) -> DecodeError {
+        DecodeError {
+            offset: self.pos,
+            reason,
+        }
+    }
+
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8]> {
         if n > self.left() {
-            return Err(format!(
-                "{what} needs {n} bytes at byte {} but only {} remain (truncated or wrong type)",
-                self.pos,
+            return Err(self.err(format!(
+                "{what} needs {n} bytes but only {} remain (truncated or wrong type)",
                 self.left()
-            ));
+            )));
         }
         let out = &self.buf[self.pos..self.pos + n];
         self.pos += n;
         Ok(out)
     }
 
-    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N], String> {
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N]> {
         let b = self.take(N, what)?;
-        b.try_into().map_err(|_| format!("{what}: short read"))
+        b.try_into()
+            .map_err(|_| self.err(format!("{what}: short read")))
     }
 
-    fn u8(&mut self) -> Result<u8, String> {
+    fn u8(&mut self) -> Result<u8> {
         Ok(self.array::<1>("uint8")?[0])
     }
 
-    fn u32(&mut self) -> Result<u32, String> {
+    fn u32(&mut self) -> Result<u32> {
         Ok(u32::from_le_bytes(self.array("uint32")?))
     }
 
-    fn f64(&mut self) -> Result<f64, String> {
+    fn f64(&mut self) -> Result<f64> {
         Ok(f64::from_le_bytes(self.array("float64")?))
     }
 
     /// A `u32` count of elements of `size` bytes each, checked against the bytes that remain.
-    fn count(&mut self, size: usize, what: &str) -> Result<usize, String> {
+    fn count(&mut self, size: usize, what: &str) -> Result<usize> {
         let n = self.u32()? as usize;
         if n.checked_mul(size).is_none_or(|bytes| bytes > self.left()) {
-            return Err(format!(
-                "{what} of {n} elements at byte {} exceeds the {} bytes that remain",
-                self.pos,
+            return Err(self.err(format!(
+                "{what} of {n} elements exceeds the {} bytes that remain",
                 self.left()
-            ));
+            )));
         }
         Ok(n)
     }
 
-    fn bytes(&mut self) -> Result<&'a [u8], String> {
+    fn bytes(&mut self) -> Result<&'a [u8]> {
         let n = self.count(1, "byte array")?;
         self.take(n, "byte array")
     }
 
-    fn string(&mut self) -> Result<String, String> {
+    fn string(&mut self) -> Result<String> {
         let at = self.pos;
         let n = self.count(1, "string")?;
         let b = self.take(n, "string")?;
-        String::from_utf8(b.to_vec()).map_err(|_| format!("string at byte {at} is not UTF-8"))
+        String::from_utf8(b.to_vec()).map_err(|_| DecodeError {
+            offset: at,
+            reason: "string is not UTF-8".into(),
+        })
     }
 
-    fn string_seq(&mut self) -> Result<Vec<String>, String> {
+    fn string_seq(&mut self) -> Result<Vec<String>> {
         // Each string takes at least its 4-byte length.
         let n = self.count(4, "string array")?;
         (0..n).map(|_| self.string()).collect()
     }
 
-    fn f64_seq(&mut self) -> Result<Vec<f64>, String> {
+    fn f64_seq(&mut self) -> Result<Vec<f64>> {
         let n = self.count(8, "float64 array")?;
         (0..n).map(|_| self.f64()).collect()
     }
 
-    fn header(&mut self) -> Result<Header, String> {
+    fn header(&mut self) -> Result<Header> {
         let _seq = self.u32()?;
         let sec = self.u32()?;
         let nanosec = self.u32()?;
-        let sec =
-            i32::try_from(sec).map_err(|_| format!("header stamp seconds {sec} beyond 2038"))?;
+        let sec = i32::try_from(sec)
+            .map_err(|_| self.err(format!("header stamp seconds {sec} beyond 2038")))?;
         Ok(Header {
             stamp: Time { sec, nanosec },
             frame_id: self.string()?,
@@ -293,7 +319,7 @@ mod tests {
 
     #[test]
     fn every_prefix_and_any_extra_byte_is_an_error() {
-        type Decoder = fn(&[u8]) -> Result<(), String>;
+        type Decoder = fn(&[u8]) -> Result<()>;
         let cases: [(Vec<u8>, Decoder); 4] = [
             (image_bytes(), |d| image(d).map(drop)),
             (joint_bytes(), |d| joint_state(d).map(drop)),
@@ -307,7 +333,11 @@ mod tests {
             }
             let mut longer = bytes.clone();
             longer.push(0);
-            assert!(decode(&longer).unwrap_err().contains("left over"));
+            let e = decode(&longer).unwrap_err();
+            assert!(
+                e.reason.contains("left over") && e.offset == bytes.len(),
+                "{e}"
+            );
         }
     }
 
@@ -316,14 +346,14 @@ mod tests {
         // frame_id claiming 4 GiB.
         let mut w = W::default();
         w.u32(0).u32(1).u32(2).u32(u32::MAX);
-        assert!(image(&w.0).unwrap_err().contains("exceeds"));
+        assert!(image(&w.0).unwrap_err().reason.contains("exceeds"));
         // A joint name array claiming 2^32-1 strings, and a float array claiming 2^31 elements.
         let mut w = W::default();
         w.header(0, 1, 2, "").u32(u32::MAX);
-        assert!(joint_state(&w.0).unwrap_err().contains("exceeds"));
+        assert!(joint_state(&w.0).unwrap_err().reason.contains("exceeds"));
         let mut w = W::default();
         w.header(0, 1, 2, "").u32(0).u32(1 << 31).f64(1.0);
-        assert!(joint_state(&w.0).unwrap_err().contains("exceeds"));
+        assert!(joint_state(&w.0).unwrap_err().reason.contains("exceeds"));
         // Image data claiming more than is there.
         let mut bytes = image_bytes();
         let n = bytes.len();
@@ -332,7 +362,7 @@ mod tests {
         // Stamps past 2038 do not fit builtin_interfaces/Time.
         let mut w = W::default();
         w.header(0, u32::MAX, 0, "").string("jpeg").u32(0);
-        assert!(compressed_image(&w.0).unwrap_err().contains("2038"));
+        assert!(compressed_image(&w.0).unwrap_err().reason.contains("2038"));
     }
 
     #[test]
@@ -341,6 +371,7 @@ mod tests {
         w.header(0, 1, 2, "").string("jpeg").u32(0);
         let at = 4 + 8 + 4 + 4; // seq, stamp, empty frame_id, format length
         w.0[at] = 0xff;
-        assert!(compressed_image(&w.0).unwrap_err().contains("UTF-8"));
+        let e = compressed_image(&w.0).unwrap_err();
+        assert!(e.reason.contains("UTF-8") && e.offset == at - 4, "{e}");
     }
 }

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
-use scaledp_converter::{ConvertOptions, JobOptions, Outcome, Progress};
+use scaledp_converter::{ConvertOptions, InputResult, JobOptions, Progress};
 use scaledp_schema::Rig;
 
 use crate::cli::{ConvertArgs, ExitStatus};
@@ -20,29 +20,39 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
             args.inputs
         );
     }
-    let opts = JobOptions {
-        convert: ConvertOptions {
-            rig,
-            fps: args.fps,
-            width: args.size.0,
-            height: args.size.1,
-            jpeg_quality: args.jpeg_quality,
-            stale_periods: args.stale_periods,
-            max_invalid_fraction: args.max_invalid,
-            task: args.task,
-            use_log_time: args.log_time,
-            window_ns: None,
-            topic_overrides: args.topics,
-        },
-        overwrite: args.overwrite,
-        shard: args.shard,
-        jobs: args
-            .jobs
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(2, usize::from)),
-        file_size_mb: args.file_size_mb,
-        include_failures: args.include_failures,
-        split_gap_s: args.split_gap,
-    };
+    let mut convert = ConvertOptions::default()
+        .size(args.size.0, args.size.1)
+        .jpeg_quality(args.jpeg_quality)
+        .stale_periods(args.stale_periods)
+        .max_invalid_fraction(args.max_invalid)
+        .use_log_time(args.log_time)
+        .reorder_window(args.reorder_window);
+    if let Some(rig) = rig {
+        convert = convert.rig(rig);
+    }
+    if let Some(fps) = args.fps {
+        convert = convert.fps(fps);
+    }
+    if let Some(task) = args.task {
+        convert = convert.task(task);
+    }
+    for (name, topic) in args.topics {
+        convert = convert.topic_override(name, topic);
+    }
+    let mut opts = JobOptions::default()
+        .convert(convert)
+        .overwrite(args.overwrite)
+        .file_size_mib(args.file_size_mib)
+        .include_failures(args.include_failures);
+    if let Some(jobs) = args.jobs {
+        opts = opts.jobs(jobs);
+    }
+    if let Some((i, n)) = args.shard {
+        opts = opts.shard(i, n);
+    }
+    if let Some(gap) = args.split_gap {
+        opts = opts.split_gap(gap);
+    }
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
             "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes {msg}",
@@ -54,10 +64,10 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
     let results = scaledp_converter::run(&inputs, &args.out, &opts, &|p| match p {
         Progress::Total(n) => bar.set_length(n as u64),
         Progress::Done {
-            outcome, frames: f, ..
+            result, frames: f, ..
         } => {
-            if let Outcome::Failed(line) = &outcome {
-                bar.suspend(|| eprintln!("error: {line}"));
+            if let InputResult::Failed(e) = result {
+                bar.suspend(|| eprintln!("error: {}", e.one_line()));
             }
             let total = frames.fetch_add(f as u64, Ordering::Relaxed) + f as u64;
             bar.set_message(format!(
@@ -71,11 +81,11 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
     summarize(&results, &args.out, start.elapsed().as_secs_f64())
 }
 
-fn summarize(results: &[(PathBuf, Outcome)], out: &Path, seconds: f64) -> Result<ExitStatus> {
+fn summarize(results: &[(PathBuf, InputResult)], out: &Path, seconds: f64) -> Result<ExitStatus> {
     let (mut converted, mut frames, mut skipped, mut failed) = (0, 0, 0, Vec::new());
     for (path, o) in results {
         match o {
-            Outcome::Converted(recs) => {
+            InputResult::Converted(recs) => {
                 for rec in recs {
                     converted += 1;
                     frames += rec.length;
@@ -91,11 +101,11 @@ fn summarize(results: &[(PathBuf, Outcome)], out: &Path, seconds: f64) -> Result
                 );
                 }
             }
-            Outcome::Skipped(why) => {
+            InputResult::Skipped(why) => {
                 skipped += 1;
                 eprintln!("skipped {}: {why}", path.display());
             }
-            Outcome::Failed(line) => failed.push(line.clone()),
+            InputResult::Failed(e) => failed.push(e.one_line()),
         }
     }
     println!(
@@ -114,8 +124,8 @@ fn summarize(results: &[(PathBuf, Outcome)], out: &Path, seconds: f64) -> Result
     })
 }
 
-pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mb: u64) -> Result<ExitStatus> {
-    let n = scaledp_converter::merge(inputs, out, file_size_mb)?;
+pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mib: u64) -> Result<ExitStatus> {
+    let n = scaledp_converter::merge(inputs, out, file_size_mib)?;
     println!(
         "{n} episodes from {} datasets → {}",
         inputs.len(),

@@ -27,8 +27,8 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
         Command::Dataset(crate::cli::DatasetCommand::Merge {
             inputs,
             out,
-            file_size_mb,
-        }) => convert::merge(&inputs, &out, file_size_mb),
+            file_size_mib,
+        }) => convert::merge(&inputs, &out, file_size_mib),
         Command::Bench(cmd) => scaledp_bench::run(cmd).map(ExitStatus::from),
         Command::Train(args) => train::run(args),
         Command::Predict(args) => predict::run(args),
