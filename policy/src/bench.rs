@@ -14,7 +14,8 @@ use crate::error::{Error, Result};
 use crate::inference::ddim_sample;
 use crate::model::{Crop, ScaleDp};
 use crate::scheduler::NoiseScheduler;
-use crate::trainer::{TrainOptions, Trainer};
+use crate::trainer::optim::{ema_update, AdamW};
+use crate::trainer::{loss_and_grads, Phases, TrainOptions, Trainer};
 
 /// Training throughput of one configuration.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -166,4 +167,132 @@ pub fn ddim_latency(
         p50_ms: at(0.5),
         p99_ms: at(0.99),
     })
+}
+
+/// CPU time (user + system) this process has used so far (s), from `/proc/self/stat`; `None`
+/// where that is not readable.
+pub fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which may hold spaces) in parentheses.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let (utime, stime): (f64, f64) = (f.get(11)?.parse().ok()?, f.get(12)?.parse().ok()?);
+    // USER_HZ is 100 on every Linux configuration that matters here.
+    Some((utime + stime) / 100.0)
+}
+
+/// Where the time of training steps on a synthetic batch went (means per step).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct StepProfile {
+    /// Samples per step.
+    pub batch_size: usize,
+    /// Steps timed.
+    pub steps: usize,
+    /// Wall time of a step (s).
+    pub step_s: f64,
+    /// CPU time of the process per step (s; user + system, all threads).
+    pub cpu_s: Option<f64>,
+    /// Forward passes and backward.
+    pub phases: Phases,
+    /// AdamW and the EMA (s).
+    pub optimizer_s: f64,
+}
+
+/// Trains a fresh model of `cfg` (seed `seed`) on one synthetic batch of `batch_size` samples
+/// (random images, state and actions, no padding) for `warmup` + `steps` steps, with the
+/// trainer's loss, backward pass, AdamW and EMA, and reports where the timed steps' time went.
+/// No loader: this isolates the model's cost from data loading.
+pub fn synthetic_step_profile(
+    cfg: &ModelConfig,
+    batch_size: usize,
+    micro_batch: Option<usize>,
+    warmup: usize,
+    steps: usize,
+    seed: u64,
+) -> Result<StepProfile> {
+    let dev = Device::Cpu;
+    let (model, params) = ScaleDp::fresh(cfg, seed, &dev)?;
+    let ema = crate::trainer::checkpointing::copy_model(cfg, &params, &dev)?.1;
+    let mut optim = AdamW::new(params, crate::trainer::AdamWConfig::default())?;
+    let sched = NoiseScheduler::new(100)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let batch = synthetic_batch(cfg, batch_size, &mut rng);
+    let (mut phases, mut opt_s, mut wall) = (Phases::default(), 0f64, 0f64);
+    let mut cpu0 = None;
+    for i in 0..warmup + steps {
+        if i == warmup {
+            cpu0 = process_cpu_s();
+        }
+        let t0 = Instant::now();
+        let mut p = Phases::default();
+        let (_, grads) = loss_and_grads(
+            &model,
+            &sched,
+            optim.params(),
+            &batch,
+            micro_batch,
+            &mut rng,
+            &mut p,
+        )?;
+        let t1 = Instant::now();
+        optim.step(&grads, 1e-4, 1.0)?;
+        ema_update(&ema, optim.params(), 0.9)?;
+        if i >= warmup {
+            opt_s += t1.elapsed().as_secs_f64();
+            wall += t0.elapsed().as_secs_f64();
+            phases.encode_s += p.encode_s;
+            phases.denoise_s += p.denoise_s;
+            phases.backward_s += p.backward_s;
+        }
+    }
+    let cpu = match (cpu0, process_cpu_s()) {
+        (Some(a), Some(b)) => Some(b - a),
+        _ => None,
+    };
+    let n = steps.max(1) as f64;
+    Ok(StepProfile {
+        batch_size,
+        steps,
+        step_s: wall / n,
+        cpu_s: cpu.map(|c| c / n),
+        phases: Phases {
+            encode_s: phases.encode_s / n,
+            denoise_s: phases.denoise_s / n,
+            backward_s: phases.backward_s / n,
+        },
+        optimizer_s: opt_s / n,
+    })
+}
+
+/// A batch of `b` samples for `cfg` with random images (uint8), state and actions.
+pub fn synthetic_batch(
+    cfg: &ModelConfig,
+    b: usize,
+    rng: &mut rand_chacha::ChaCha8Rng,
+) -> scaledp_datasets::Batch {
+    use rand::Rng;
+    let (to, ch, cams) = (cfg.obs_horizon, cfg.action_chunk, cfg.cameras.len());
+    let (w, h) = (cfg.image_width, cfg.image_height);
+    let n_img = b * to * cams * 3 * (w * h) as usize;
+    scaledp_datasets::Batch {
+        len: b,
+        obs_horizon: to,
+        action_chunk: ch,
+        cameras: cfg.cameras.clone(),
+        height: h,
+        width: w,
+        state_dim: cfg.state_dim,
+        action_dim: cfg.action_dim,
+        images: (0..n_img).map(|_| rng.random::<u8>()).collect(),
+        state: (0..b * to * cfg.state_dim)
+            .map(|_| rng.random_range(-1f32..1.0))
+            .collect(),
+        action: (0..b * ch * cfg.action_dim)
+            .map(|_| rng.random_range(-1f32..1.0))
+            .collect(),
+        obs_is_pad: vec![false; b * to],
+        action_is_pad: vec![false; b * ch],
+        episode_index: vec![0; b],
+        frame_index: (0..b as i64).collect(),
+    }
 }

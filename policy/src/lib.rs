@@ -92,8 +92,10 @@ pub use checkpoint::{
 pub use config::{DiffusionConfig, ModelConfig, ModelSize};
 pub use error::{Error, Mismatch, Result};
 pub use inference::{ddim_sample, ActionChunk, Observation, Policy};
+pub use model::cpu::init_threads;
 pub use predict::{predict_episode, EpisodePrediction};
 pub use scheduler::NoiseScheduler;
 pub use trainer::{
-    cosine_lr, AdamWConfig, EmaConfig, Event, StepRecord, Summary, TrainOptions, Trainer, ValRecord,
+    cosine_lr, AdamWConfig, EmaConfig, Event, Phases, StepRecord, Summary, TrainOptions, Trainer,
+    ValRecord,
 };

@@ -1,44 +1,40 @@
-//! 2-D convolution for training on the CPU: im2col + one large GEMM per chunk of samples, with
-//! its own backward pass.
+//! 2-D convolution for training on the CPU, channels-last (NHWC): im2col + one large GEMM per
+//! chunk of samples, with its own backward pass.
 //!
 //! candle 0.11's CPU `conv2d` is differentiable, but its input gradient goes through
 //! `conv_transpose2d`, a loop of dot products without GEMM, and its weight gradient through a
-//! convolution whose kernel is the whole output map. On ResNet-18 that made one training step
-//! several times slower than the forward pass warranted (see the crate docs for the figures).
-//! Here all three products are GEMMs over a patch matrix laid out `[samples · pixels, K]`
-//! (K = C_in·kh·kw in PyTorch's weight order):
+//! convolution whose kernel is the whole output map. Here all three products are GEMMs over a
+//! patch matrix laid out `[samples · pixels, K]`, K = kh·kw·C_in in (i, j, c) order:
 //!
-//! - forward: `y = patches · Wᵀ`,
-//! - input gradient: `dpatches = dy · W`, scattered back by col2im,
-//! - weight gradient: `dW = dyᵀ · patches` (patches recomputed, never stored).
+//! - forward: `y = patches · W'ᵀ` (W' is the kernel reordered to `[C_out, kh, kw, C_in]`),
+//! - input gradient: `dpatches = dy · W'`, scattered back by col2im,
+//! - weight gradient: `dW' = dyᵀ · patches` (patches recomputed, never stored).
 //!
-//! The patch matrix is built for a bounded chunk of samples at a time, so memory stays near the
-//! size of the activations. Other devices use candle's own `conv2d`.
+//! Channels-last, a patch row is kh·kw contiguous runs of C_in values, the GEMM's output rows
+//! are the output's pixels (no transposition), and a 1×1 stride-1 convolution needs no patch
+//! matrix at all. The patch matrix is built for a bounded chunk of samples at a time in a
+//! buffer reused between calls.
 
-use candle_core::{CpuStorage, CustomOp2, DType, Device, Layout, Shape, Tensor};
+use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-/// Largest patch matrix built at once (f32 values): 32 M = 128 MB.
-const MAX_PATCH_VALUES: usize = 32 << 20;
+use crate::model::cpu::{gemm, values, with_scratch};
+
+/// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
+const MAX_PATCH_VALUES: usize = 8 << 20;
 
 /// A convolution without bias, PyTorch's `Conv2d(..., bias=False)` with equal stride and
-/// padding on both axes; `x` is `[B, C_in, H, W]`, `w` `[C_out, C_in, kh, kw]`.
-pub fn conv2d(
+/// padding on both axes, on a channels-last input: `x` is `[B, H, W, C_in]`, `w` PyTorch's
+/// `[C_out, C_in, kh, kw]`; the output is `[B, H', W', C_out]`. CPU and f32 only.
+pub fn conv2d_nhwc(
     x: &Tensor,
     w: &Tensor,
     stride: usize,
     padding: usize,
 ) -> candle_core::Result<Tensor> {
-    if x.device().is_cpu()
-        && x.dtype() == DType::F32
-        && std::env::var_os("SCALEDP_NATIVE_CONV").is_none()
-    {
-        let x = x.contiguous()?;
-        let w = w.contiguous()?;
-        x.apply_op2(&w, Conv { stride, padding })
-    } else {
-        x.conv2d(w, padding, stride, 1, 1)
-    }
+    let x = x.contiguous()?;
+    let w = w.contiguous()?;
+    x.apply_op2(&w, Conv { stride, padding })
 }
 
 /// The geometry of one convolution.
@@ -56,8 +52,9 @@ struct Geom {
 }
 
 impl Geom {
+    /// From the NHWC input's and the OIHW kernel's dims.
     fn new(x: &[usize], k: &[usize], stride: usize, padding: usize) -> candle_core::Result<Self> {
-        let (&[b, c_in, h, w], &[c_out, kc, kh, kw]) = (x, k) else {
+        let (&[b, h, w, c_in], &[c_out, kc, kh, kw]) = (x, k) else {
             candle_core::bail!("conv2d: input {x:?} and kernel {k:?} must both be 4-D");
         };
         if kc != c_in {
@@ -90,135 +87,108 @@ impl Geom {
     fn k(&self) -> usize {
         self.c_in * self.kh * self.kw
     }
+    /// Values of one input sample.
+    fn per_in(&self) -> usize {
+        self.h * self.w * self.c_in
+    }
     /// Samples per chunk so that a chunk's patch matrix stays under the limit.
     fn chunk(&self) -> usize {
         (MAX_PATCH_VALUES / (self.pixels() * self.k()).max(1)).clamp(1, self.b.max(1))
     }
-    /// Whether the patch matrix of a sample is its input, transposed (1×1, stride 1).
+    /// Whether the patch matrix is the input itself (1×1, stride 1, no padding).
     fn pointwise(&self) -> bool {
         self.kh == 1 && self.kw == 1 && self.stride == 1 && self.padding == 0
     }
-}
-
-/// The contiguous values of a storage with a contiguous layout.
-fn values<'a>(s: &'a CpuStorage, l: &Layout) -> candle_core::Result<&'a [f32]> {
-    let data = s.as_slice::<f32>()?;
-    match l.contiguous_offsets() {
-        Some((start, end)) => Ok(&data[start..end]),
-        None => candle_core::bail!("conv2d: operands must be contiguous"),
+    /// The input row and column of kernel tap (i, j) at output (oy, ox), if inside.
+    #[inline]
+    fn tap(&self, oy: usize, ox: usize, i: usize, j: usize) -> Option<(usize, usize)> {
+        let y = (oy * self.stride + i).checked_sub(self.padding)?;
+        let x = (ox * self.stride + j).checked_sub(self.padding)?;
+        (y < self.h && x < self.w).then_some((y, x))
     }
 }
 
-/// Patches of samples `x` (`n` samples, NCHW): `[n · P, K]`, K ordered (c, i, j).
-fn im2col(g: &Geom, x: &[f32], n: usize) -> Vec<f32> {
-    let (oh, ow, k) = (g.out_h(), g.out_w(), g.k());
-    let mut out = vec![0f32; n * oh * ow * k];
-    let plane = g.h * g.w;
-    out.par_chunks_mut(ow * k)
+/// `[C_out, C_in, kh, kw]` → `[C_out, kh, kw, C_in]`.
+fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
+    let (ci, kk) = (g.c_in, g.kh * g.kw);
+    let mut out = vec![0f32; w.len()];
+    for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
+        let src = &w[o * ci * kk..(o + 1) * ci * kk];
+        for c in 0..ci {
+            for t in 0..kk {
+                dst[t * ci + c] = src[c * kk + t];
+            }
+        }
+    }
+    out
+}
+
+/// `[C_out, kh, kw, C_in]` → `[C_out, C_in, kh, kw]`.
+fn ohwi_to_oihw(g: &Geom, w: &[f32]) -> Vec<f32> {
+    let (ci, kk) = (g.c_in, g.kh * g.kw);
+    let mut out = vec![0f32; w.len()];
+    for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
+        let src = &w[o * ci * kk..(o + 1) * ci * kk];
+        for c in 0..ci {
+            for t in 0..kk {
+                dst[c * kk + t] = src[t * ci + c];
+            }
+        }
+    }
+    out
+}
+
+/// Patches of the `n` samples `x` (NHWC) into `cols` `[n · P, K]`, K ordered (i, j, c).
+fn im2col(g: &Geom, x: &[f32], n: usize, cols: &mut [f32]) {
+    let (oh, ow, k, ci) = (g.out_h(), g.out_w(), g.k(), g.c_in);
+    cols[..n * oh * ow * k]
+        .par_chunks_mut(ow * k)
         .enumerate()
         .for_each(|(row, dst)| {
             let (s, oy) = (row / oh, row % oh);
-            let xs = &x[s * g.c_in * plane..(s + 1) * g.c_in * plane];
+            let xs = &x[s * g.per_in()..(s + 1) * g.per_in()];
             for ox in 0..ow {
                 let d = &mut dst[ox * k..(ox + 1) * k];
-                let mut idx = 0;
-                for c in 0..g.c_in {
-                    let xc = &xs[c * plane..(c + 1) * plane];
-                    for i in 0..g.kh {
-                        let y = (oy * g.stride + i) as isize - g.padding as isize;
-                        if y < 0 || y >= g.h as isize {
-                            idx += g.kw;
-                            continue;
-                        }
-                        let xr = &xc[y as usize * g.w..(y as usize + 1) * g.w];
-                        for j in 0..g.kw {
-                            let xx = (ox * g.stride + j) as isize - g.padding as isize;
-                            if xx >= 0 && xx < g.w as isize {
-                                d[idx] = xr[xx as usize];
+                for i in 0..g.kh {
+                    for j in 0..g.kw {
+                        let t = &mut d[(i * g.kw + j) * ci..(i * g.kw + j + 1) * ci];
+                        match g.tap(oy, ox, i, j) {
+                            Some((y, xx)) => {
+                                let at = (y * g.w + xx) * ci;
+                                t.copy_from_slice(&xs[at..at + ci]);
                             }
-                            idx += 1;
+                            None => t.fill(0.0),
                         }
                     }
                 }
             }
         });
-    out
 }
 
-/// Adds patch gradients `[n · P, K]` back into `dx` (`n` samples, NCHW).
+/// Adds patch gradients `cols` `[n · P, K]` back into `dx` (`n` samples, NHWC).
 fn col2im(g: &Geom, cols: &[f32], dx: &mut [f32]) {
-    let (oh, ow, k) = (g.out_h(), g.out_w(), g.k());
-    let plane = g.h * g.w;
-    dx.par_chunks_mut(g.c_in * plane)
+    let (oh, ow, k, ci) = (g.out_h(), g.out_w(), g.k(), g.c_in);
+    dx.par_chunks_mut(g.per_in())
         .enumerate()
         .for_each(|(s, xs)| {
             let cs = &cols[s * oh * ow * k..(s + 1) * oh * ow * k];
             for oy in 0..oh {
                 for ox in 0..ow {
                     let src = &cs[(oy * ow + ox) * k..(oy * ow + ox + 1) * k];
-                    let mut idx = 0;
-                    for c in 0..g.c_in {
-                        let xc = &mut xs[c * plane..(c + 1) * plane];
-                        for i in 0..g.kh {
-                            let y = (oy * g.stride + i) as isize - g.padding as isize;
-                            if y < 0 || y >= g.h as isize {
-                                idx += g.kw;
-                                continue;
-                            }
-                            let xr = &mut xc[y as usize * g.w..(y as usize + 1) * g.w];
-                            for j in 0..g.kw {
-                                let xx = (ox * g.stride + j) as isize - g.padding as isize;
-                                if xx >= 0 && xx < g.w as isize {
-                                    xr[xx as usize] += src[idx];
+                    for i in 0..g.kh {
+                        for j in 0..g.kw {
+                            if let Some((y, xx)) = g.tap(oy, ox, i, j) {
+                                let at = (y * g.w + xx) * ci;
+                                let t = &src[(i * g.kw + j) * ci..(i * g.kw + j + 1) * ci];
+                                for (d, v) in xs[at..at + ci].iter_mut().zip(t) {
+                                    *d += v;
                                 }
-                                idx += 1;
                             }
                         }
                     }
                 }
             }
         });
-}
-
-/// `[n, C, P]` (NCHW) → `[n · P, C]`.
-fn to_rows(v: &[f32], n: usize, c: usize, p: usize) -> Vec<f32> {
-    let mut out = vec![0f32; n * p * c];
-    out.par_chunks_mut(p * c).enumerate().for_each(|(s, dst)| {
-        let src = &v[s * c * p..(s + 1) * c * p];
-        for ci in 0..c {
-            for pi in 0..p {
-                dst[pi * c + ci] = src[ci * p + pi];
-            }
-        }
-    });
-    out
-}
-
-/// `[n · P, C]` → `[n, C, P]` (NCHW), written into `dst`.
-fn from_rows(v: &[f32], n: usize, c: usize, p: usize, dst: &mut [f32]) {
-    dst[..n * c * p]
-        .par_chunks_mut(c * p)
-        .enumerate()
-        .for_each(|(s, d)| {
-            let src = &v[s * p * c..(s + 1) * p * c];
-            for pi in 0..p {
-                for ci in 0..c {
-                    d[ci * p + pi] = src[pi * c + ci];
-                }
-            }
-        });
-}
-
-/// The patch matrix of samples `s0 .. s0 + n` as a `[n · P, K]` tensor.
-fn patches(g: &Geom, x: &[f32], s0: usize, n: usize) -> candle_core::Result<Tensor> {
-    let per = g.c_in * g.h * g.w;
-    let xs = &x[s0 * per..(s0 + n) * per];
-    let cols = if g.pointwise() {
-        to_rows(xs, n, g.c_in, g.h * g.w)
-    } else {
-        im2col(g, xs, n)
-    };
-    Tensor::from_vec(cols, (n * g.pixels(), g.k()), &Device::Cpu)
 }
 
 /// `y = conv(x, w)`; its backward is [`GradInput`] and [`GradWeight`].
@@ -229,7 +199,7 @@ struct Conv {
 
 impl CustomOp2 for Conv {
     fn name(&self) -> &'static str {
-        "scaledp-conv2d"
+        "scaledp-conv2d-nhwc"
     }
 
     fn cpu_fwd(
@@ -241,18 +211,23 @@ impl CustomOp2 for Conv {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let g = Geom::new(l1.dims(), l2.dims(), self.stride, self.padding)?;
         let (x, w) = (values(s1, l1)?, values(s2, l2)?);
-        let wt = Tensor::from_slice(w, (g.c_out, g.k()), &Device::Cpu)?.t()?;
-        let p = g.pixels();
-        let mut out = vec![0f32; g.b * g.c_out * p];
-        let step = g.chunk();
-        for s0 in (0..g.b).step_by(step) {
-            let n = step.min(g.b - s0);
-            let y = patches(&g, x, s0, n)?.matmul(&wt)?;
-            let y = y.flatten_all()?.to_vec1::<f32>()?;
-            let dst = &mut out[s0 * g.c_out * p..(s0 + n) * g.c_out * p];
-            from_rows(&y, n, g.c_out, p, dst);
+        let wp = oihw_to_ohwi(&g, w);
+        let (p, k, co) = (g.pixels(), g.k(), g.c_out);
+        let mut out = vec![0f32; g.b * p * co];
+        if g.pointwise() {
+            gemm(g.b * p, co, k, x, false, &wp, true, &mut out, false);
+        } else {
+            let step = g.chunk();
+            with_scratch(step * p * k, |cols| {
+                for s0 in (0..g.b).step_by(step) {
+                    let n = step.min(g.b - s0);
+                    im2col(&g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
+                    let dst = &mut out[s0 * p * co..(s0 + n) * p * co];
+                    gemm(n * p, co, k, cols, false, &wp, true, dst, false);
+                }
+            });
         }
-        let shape = Shape::from((g.b, g.c_out, g.out_h(), g.out_w()));
+        let shape = Shape::from((g.b, g.out_h(), g.out_w(), co));
         Ok((CpuStorage::F32(out), shape))
     }
 
@@ -298,7 +273,7 @@ struct GradInput {
 
 impl CustomOp2 for GradInput {
     fn name(&self) -> &'static str {
-        "scaledp-conv2d-grad-input"
+        "scaledp-conv2d-nhwc-grad-input"
     }
 
     fn cpu_fwd(
@@ -310,22 +285,21 @@ impl CustomOp2 for GradInput {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let g = Geom::new(&self.x_dims, l2.dims(), self.stride, self.padding)?;
         let (dy, w) = (values(s1, l1)?, values(s2, l2)?);
-        let wm = Tensor::from_slice(w, (g.c_out, g.k()), &Device::Cpu)?;
-        let p = g.pixels();
-        let per = g.c_in * g.h * g.w;
-        let mut dx = vec![0f32; g.b * per];
-        let step = g.chunk();
-        for s0 in (0..g.b).step_by(step) {
-            let n = step.min(g.b - s0);
-            let rows = to_rows(&dy[s0 * g.c_out * p..(s0 + n) * g.c_out * p], n, g.c_out, p);
-            let rows = Tensor::from_vec(rows, (n * p, g.c_out), &Device::Cpu)?;
-            let cols = rows.matmul(&wm)?.flatten_all()?.to_vec1::<f32>()?;
-            let dst = &mut dx[s0 * per..(s0 + n) * per];
-            if g.pointwise() {
-                from_rows(&cols, n, g.c_in, p, dst);
-            } else {
-                col2im(&g, &cols, dst);
-            }
+        let wp = oihw_to_ohwi(&g, w);
+        let (p, k, co) = (g.pixels(), g.k(), g.c_out);
+        let mut dx = vec![0f32; g.b * g.per_in()];
+        if g.pointwise() {
+            gemm(g.b * p, k, co, dy, false, &wp, false, &mut dx, false);
+        } else {
+            let step = g.chunk();
+            with_scratch(step * p * k, |cols| {
+                for s0 in (0..g.b).step_by(step) {
+                    let n = step.min(g.b - s0);
+                    let dys = &dy[s0 * p * co..(s0 + n) * p * co];
+                    gemm(n * p, k, co, dys, false, &wp, false, cols, false);
+                    col2im(&g, cols, &mut dx[s0 * g.per_in()..(s0 + n) * g.per_in()]);
+                }
+            });
         }
         Ok((CpuStorage::F32(dx), Shape::from(self.x_dims.clone())))
     }
@@ -340,7 +314,7 @@ struct GradWeight {
 
 impl CustomOp2 for GradWeight {
     fn name(&self) -> &'static str {
-        "scaledp-conv2d-grad-weight"
+        "scaledp-conv2d-nhwc-grad-weight"
     }
 
     fn cpu_fwd(
@@ -352,23 +326,22 @@ impl CustomOp2 for GradWeight {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let g = Geom::new(l1.dims(), &self.w_dims, self.stride, self.padding)?;
         let (x, dy) = (values(s1, l1)?, values(s2, l2)?);
-        let p = g.pixels();
-        let mut dw: Option<Tensor> = None;
-        let step = g.chunk();
-        for s0 in (0..g.b).step_by(step) {
-            let n = step.min(g.b - s0);
-            let rows = to_rows(&dy[s0 * g.c_out * p..(s0 + n) * g.c_out * p], n, g.c_out, p);
-            let rows = Tensor::from_vec(rows, (n * p, g.c_out), &Device::Cpu)?;
-            let part = rows.t()?.matmul(&patches(&g, x, s0, n)?)?;
-            dw = Some(match dw {
-                None => part,
-                Some(acc) => (acc + part)?,
+        let (p, k, co) = (g.pixels(), g.k(), g.c_out);
+        let mut dwp = vec![0f32; co * k];
+        if g.pointwise() {
+            gemm(co, k, g.b * p, dy, true, x, false, &mut dwp, false);
+        } else {
+            let step = g.chunk();
+            with_scratch(step * p * k, |cols| {
+                for s0 in (0..g.b).step_by(step) {
+                    let n = step.min(g.b - s0);
+                    im2col(&g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
+                    let dys = &dy[s0 * p * co..(s0 + n) * p * co];
+                    gemm(co, k, n * p, dys, true, cols, false, &mut dwp, s0 > 0);
+                }
             });
         }
-        let dw = match dw {
-            Some(t) => t.flatten_all()?.to_vec1::<f32>()?,
-            None => vec![0f32; g.c_out * g.k()],
-        };
+        let dw = ohwi_to_oihw(&g, &dwp);
         Ok((CpuStorage::F32(dw), Shape::from(self.w_dims.clone())))
     }
 }
@@ -376,9 +349,9 @@ impl CustomOp2 for GradWeight {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::Var;
+    use candle_core::{Device, Var};
 
-    /// The op and its gradients against candle's own conv2d.
+    /// The op and its gradients against candle's own conv2d on the NCHW view.
     #[test]
     fn matches_candles_conv2d_and_its_gradients() -> candle_core::Result<()> {
         let dev = Device::Cpu;
@@ -391,10 +364,14 @@ mod tests {
             // height, which breaks a strided 1×1 convolution of a 7×8 input.
             (6, 3, 8, 8, 1, 2, 0),
         ] {
-            let x = Var::from_tensor(&Tensor::randn(0f32, 1., (2, c_in, h, w), &dev)?)?;
+            let x = Var::from_tensor(&Tensor::randn(0f32, 1., (2, h, w, c_in), &dev)?)?;
             let wt = Var::from_tensor(&Tensor::randn(0f32, 1., (c_out, c_in, k, k), &dev)?)?;
-            let ours = conv2d(x.as_tensor(), wt.as_tensor(), stride, pad)?;
-            let theirs = x.as_tensor().conv2d(wt.as_tensor(), pad, stride, 1, 1)?;
+            let ours = conv2d_nhwc(x.as_tensor(), wt.as_tensor(), stride, pad)?;
+            let theirs = x
+                .as_tensor()
+                .permute((0, 3, 1, 2))?
+                .conv2d(wt.as_tensor(), pad, stride, 1, 1)?
+                .permute((0, 2, 3, 1))?;
             assert_eq!(ours.dims(), theirs.dims());
             let diff = (&ours - &theirs)?.abs()?.max_all()?.to_scalar::<f32>()?;
             assert!(diff < 1e-4, "forward differs by {diff}");
@@ -414,6 +391,39 @@ mod tests {
                     "gradient differs by {d} (of {scale})"
                 );
             }
+        }
+        Ok(())
+    }
+
+    /// Chunked patch matrices (more samples than one chunk holds) give the same result.
+    #[test]
+    fn chunks_add_up() -> candle_core::Result<()> {
+        let dev = Device::Cpu;
+        let g = Geom::new(&[5, 80, 80, 64], &[4, 64, 3, 3], 1, 1)?;
+        assert!(g.chunk() < 5, "the case must span several chunks");
+        let x = Var::from_tensor(&Tensor::randn(0f32, 1., (5, 80, 80, 64), &dev)?)?;
+        let wt = Var::from_tensor(&Tensor::randn(0f32, 0.1, (4, 64, 3, 3), &dev)?)?;
+        let ours = conv2d_nhwc(x.as_tensor(), wt.as_tensor(), 1, 1)?;
+        let theirs = x
+            .as_tensor()
+            .permute((0, 3, 1, 2))?
+            .conv2d(wt.as_tensor(), 1, 1, 1, 1)?
+            .permute((0, 2, 3, 1))?;
+        let diff = (&ours - &theirs)?.abs()?.max_all()?.to_scalar::<f32>()?;
+        assert!(diff < 1e-3, "forward differs by {diff}");
+        let m = Tensor::randn(0f32, 1., ours.dims(), &dev)?;
+        let g1 = (ours * &m)?.sum_all()?.backward()?;
+        let g2 = (theirs * &m)?.sum_all()?.backward()?;
+        for v in [&x, &wt] {
+            let (Some(a), Some(b)) = (g1.get(v.as_tensor()), g2.get(v.as_tensor())) else {
+                panic!("no gradient")
+            };
+            let d = (a - b)?.abs()?.max_all()?.to_scalar::<f32>()?;
+            let scale = b.abs()?.max_all()?.to_scalar::<f32>()?;
+            assert!(
+                d <= 1e-4 * scale.max(1.0),
+                "gradient differs by {d} (of {scale})"
+            );
         }
         Ok(())
     }

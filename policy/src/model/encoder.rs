@@ -11,7 +11,6 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::error::Result;
-use crate::model::conv::conv2d;
 use crate::model::params::{Builder, Init};
 use crate::model::resnet::ResNet18;
 
@@ -39,12 +38,28 @@ impl SpatialSoftmax {
         })
     }
 
+    /// `x` is channels-last `[N, h, w, C]` on the CPU, channels-first elsewhere.
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let (n, _, h, w) = x.dims4()?;
         let k = self.keypoints;
-        let maps = conv2d(x, &self.weight, 1, 0)?
-            .broadcast_add(&self.bias.reshape((1, k, 1, 1))?)?
-            .reshape((n * k, h * w))?;
+        let (n, h, w, maps) = if x.device().is_cpu() {
+            // The 1×1 convolution of channels-last maps is one matrix product.
+            let (n, h, w, c) = x.dims4()?;
+            let maps = x
+                .reshape((n * h * w, c))?
+                .matmul(&self.weight.reshape((k, c))?.t()?)?
+                .broadcast_add(&self.bias)?
+                .reshape((n, h * w, k))?
+                .transpose(1, 2)?
+                .contiguous()?;
+            (n, h, w, maps)
+        } else {
+            let (n, _, h, w) = x.dims4()?;
+            let maps = x
+                .conv2d(&self.weight, 0, 1, 1, 1)?
+                .broadcast_add(&self.bias.reshape((1, k, 1, 1))?)?;
+            (n, h, w, maps)
+        };
+        let maps = maps.reshape((n * k, h * w))?;
         let attention = candle_nn::ops::softmax(&maps, 1)?;
         let grid = Tensor::from_vec(grid(h, w), (h * w, 2), x.device())?;
         Ok(attention.matmul(&grid)?.reshape((n, 2 * k))?)
@@ -126,9 +141,9 @@ fn centre(d: usize) -> usize {
     }
 }
 
-/// Crops `n` uint8 RGB images `[n, 3, h, w]` to `[n, 3, ch, cw]` and scales them to [0, 1].
-/// `pick(i)` selects image i of the source (so one camera can be taken out of a batch laid out
-/// `[B, To, cams, 3, H, W]`).
+/// Crops `n` uint8 RGB images `[n, 3, h, w]` to `[n, 3, ch, cw]` (`[n, ch, cw, 3]` when
+/// `channels_last`) and scales them to [0, 1]. `pick(i)` selects image i of the source (so one
+/// camera can be taken out of a batch laid out `[B, To, cams, 3, H, W]`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn crop_images(
     src: &[u8],
@@ -137,6 +152,7 @@ pub(crate) fn crop_images(
     (w, h): (usize, usize),
     (cw, ch): (usize, usize),
     crop: Crop,
+    channels_last: bool,
     rng: &mut ChaCha8Rng,
     device: &Device,
 ) -> Result<Tensor> {
@@ -152,12 +168,23 @@ pub(crate) fn crop_images(
         for c in 0..3 {
             for r in 0..ch {
                 let s = &img[c * plane + (y0 + r) * w + x0..][..cw];
-                let d = &mut dst[(c * ch + r) * cw..][..cw];
-                for (d, s) in d.iter_mut().zip(s) {
-                    *d = f32::from(*s) / 255.0;
+                if channels_last {
+                    let d = &mut dst[r * cw * 3..(r + 1) * cw * 3];
+                    for (k, s) in s.iter().enumerate() {
+                        d[k * 3 + c] = f32::from(*s) / 255.0;
+                    }
+                } else {
+                    let d = &mut dst[(c * ch + r) * cw..][..cw];
+                    for (d, s) in d.iter_mut().zip(s) {
+                        *d = f32::from(*s) / 255.0;
+                    }
                 }
             }
         }
     }
-    Ok(Tensor::from_vec(out, (n, 3, ch, cw), device)?)
+    Ok(if channels_last {
+        Tensor::from_vec(out, (n, ch, cw, 3), device)?
+    } else {
+        Tensor::from_vec(out, (n, 3, ch, cw), device)?
+    })
 }

@@ -1,14 +1,18 @@
-//! Fused CPU kernels with their own backward passes for the encoder's hot spots: GroupNorm
-//! (optionally followed by ReLU) and the stem's 3×3 / stride-2 max-pool. Composed of candle
-//! ops, a GroupNorm is ~12 passes over the activation in the forward pass and more in the
-//! backward, each allocating; these are two or three. Other devices use composed ops.
+//! Fused CPU kernels with their own backward passes for the encoder's hot spots, on
+//! channels-last (NHWC) activations: GroupNorm (optionally followed by ReLU), the stem's
+//! 3×3 / stride-2 max-pool, and a residual block's `relu(a + b)`. Composed of candle ops, a
+//! GroupNorm is ~12 passes over the activation in the forward pass and more in the backward,
+//! each allocating; these are two or three, parallel over samples. Other devices use composed
+//! ops on NCHW activations ([`group_norm_nchw`]).
 
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, CustomOp3, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-/// `GroupNorm(groups, eps)` of `x` `[N, C, *]` with per-channel `gamma`, `beta`, then ReLU
-/// when `relu`.
-pub fn group_norm(
+use crate::model::cpu::values;
+
+/// `GroupNorm(groups, eps)` of a channels-last `x` `[N, *, C]` with per-channel `gamma`,
+/// `beta`, then ReLU when `relu`. CPU and f32 only.
+pub fn group_norm_nhwc(
     x: &Tensor,
     gamma: &Tensor,
     beta: &Tensor,
@@ -16,12 +20,21 @@ pub fn group_norm(
     eps: f64,
     relu: bool,
 ) -> candle_core::Result<Tensor> {
-    if x.device().is_cpu() && x.dtype() == candle_core::DType::F32 {
-        let op = GroupNorm { groups, eps, relu };
-        return x
-            .contiguous()?
-            .apply_op3(&gamma.contiguous()?, &beta.contiguous()?, op);
-    }
+    let op = GroupNorm { groups, eps, relu };
+    x.contiguous()?
+        .apply_op3(&gamma.contiguous()?, &beta.contiguous()?, op)
+}
+
+/// `GroupNorm(groups, eps)` of a channels-first `x` `[N, C, *]`, composed of candle ops (for
+/// devices other than the CPU, and as the tests' reference).
+pub fn group_norm_nchw(
+    x: &Tensor,
+    gamma: &Tensor,
+    beta: &Tensor,
+    groups: usize,
+    eps: f64,
+    relu: bool,
+) -> candle_core::Result<Tensor> {
     let (n, c) = (x.dim(0)?, x.dim(1)?);
     let dims = x.dims().to_vec();
     let xg = x.reshape((n, groups, ()))?;
@@ -43,33 +56,31 @@ pub fn group_norm(
     }
 }
 
-fn values<'a>(s: &'a CpuStorage, l: &Layout) -> candle_core::Result<&'a [f32]> {
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&s.as_slice::<f32>()?[a..b]),
-        None => candle_core::bail!("fused op: non-contiguous operand"),
-    }
-}
-
-/// Geometry: N samples, C channels, G groups, S spatial values per channel.
+/// Geometry: N samples, S pixels, C channels (innermost), G groups.
 #[derive(Clone, Copy)]
 struct Dims {
     n: usize,
+    s: usize,
     c: usize,
     g: usize,
-    s: usize,
 }
 
 impl Dims {
     fn of(dims: &[usize], groups: usize) -> candle_core::Result<Self> {
-        if dims.len() < 2 || groups == 0 || dims[1] % groups != 0 {
+        let c = dims.last().copied().unwrap_or(0);
+        if dims.len() < 2 || groups == 0 || c % groups != 0 {
             candle_core::bail!("group norm: shape {dims:?} with {groups} groups");
         }
         Ok(Dims {
             n: dims[0],
-            c: dims[1],
+            s: dims[1..dims.len() - 1].iter().product(),
+            c,
             g: groups,
-            s: dims[2..].iter().product(),
         })
+    }
+    /// Values per sample.
+    fn per(&self) -> usize {
+        self.s * self.c
     }
     /// Values per (sample, group).
     fn m(&self) -> usize {
@@ -77,16 +88,30 @@ impl Dims {
     }
 }
 
-/// Mean and 1/σ of one group's values (two passes in f64 for accuracy).
-fn stats(v: &[f32], eps: f64) -> (f32, f32) {
-    let n = v.len().max(1) as f64;
-    let mean = v.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
-    let var = v
-        .iter()
-        .map(|&x| (f64::from(x) - mean).powi(2))
-        .sum::<f64>()
-        / n;
-    (mean as f32, (1.0 / (var + eps).sqrt()) as f32)
+/// Per group of one sample (`x` `[S, C]`): mean and 1/σ, two passes in f64 for accuracy.
+fn stats(d: &Dims, x: &[f32], eps: f64) -> (Vec<f32>, Vec<f32>) {
+    let cg = d.c / d.g;
+    let m = d.m().max(1) as f64;
+    let mut sum = vec![0f64; d.c];
+    for px in x.chunks_exact(d.c) {
+        for (s, &v) in sum.iter_mut().zip(px) {
+            *s += f64::from(v);
+        }
+    }
+    let mean: Vec<f64> = sum.chunks(cg).map(|s| s.iter().sum::<f64>() / m).collect();
+    let mean_c: Vec<f64> = (0..d.c).map(|c| mean[c / cg]).collect();
+    let mut sq = vec![0f64; d.c];
+    for px in x.chunks_exact(d.c) {
+        for ((s, &v), &mu) in sq.iter_mut().zip(px).zip(&mean_c) {
+            let e = f64::from(v) - mu;
+            *s += e * e;
+        }
+    }
+    let rstd = sq
+        .chunks(cg)
+        .map(|s| (1.0 / (s.iter().sum::<f64>() / m + eps).sqrt()) as f32)
+        .collect();
+    (mean.iter().map(|&v| v as f32).collect(), rstd)
 }
 
 struct GroupNorm {
@@ -97,7 +122,7 @@ struct GroupNorm {
 
 impl CustomOp3 for GroupNorm {
     fn name(&self) -> &'static str {
-        "scaledp-group-norm"
+        "scaledp-group-norm-nhwc"
     }
 
     fn cpu_fwd(
@@ -113,17 +138,15 @@ impl CustomOp3 for GroupNorm {
         let (x, gamma, beta) = (values(s1, l1)?, values(s2, l2)?, values(s3, l3)?);
         let mut y = vec![0f32; x.len()];
         let cg = d.c / d.g;
-        y.par_chunks_mut(d.m())
-            .zip(x.par_chunks(d.m()))
-            .enumerate()
-            .for_each(|(ng, (y, x))| {
-                let (mean, rstd) = stats(x, self.eps);
-                let g = ng % d.g;
-                for (ci, (y, x)) in y.chunks_mut(d.s).zip(x.chunks(d.s)).enumerate() {
-                    let c = g * cg + ci;
-                    let a = rstd * gamma[c];
-                    let b = beta[c] - mean * a;
-                    for (y, &x) in y.iter_mut().zip(x) {
+        y.par_chunks_mut(d.per())
+            .zip(x.par_chunks(d.per()))
+            .for_each(|(y, x)| {
+                let (mean, rstd) = stats(&d, x, self.eps);
+                // y = x·a + b per channel.
+                let a: Vec<f32> = (0..d.c).map(|c| rstd[c / cg] * gamma[c]).collect();
+                let b: Vec<f32> = (0..d.c).map(|c| beta[c] - mean[c / cg] * a[c]).collect();
+                for (y, x) in y.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
+                    for (((y, &x), &a), &b) in y.iter_mut().zip(x).zip(&a).zip(&b) {
                         let v = x * a + b;
                         *y = if self.relu { v.max(0.0) } else { v };
                     }
@@ -158,7 +181,7 @@ impl CustomOp3 for GroupNorm {
     }
 }
 
-/// The gradients of [`GroupNorm`], packed: `[dx (N·C·S), dgamma (C), dbeta (C)]`.
+/// The gradients of [`GroupNorm`], packed: `[dx (N·S·C), dgamma (C), dbeta (C)]`.
 struct GroupNormGrad {
     groups: usize,
     eps: f64,
@@ -167,7 +190,7 @@ struct GroupNormGrad {
 
 impl CustomOp3 for GroupNormGrad {
     fn name(&self) -> &'static str {
-        "scaledp-group-norm-grad"
+        "scaledp-group-norm-nhwc-grad"
     }
 
     fn cpu_fwd(
@@ -183,63 +206,88 @@ impl CustomOp3 for GroupNormGrad {
         let (x, dy, gb) = (values(s1, l1)?, values(s2, l2)?, values(s3, l3)?);
         let (gamma, beta) = gb.split_at(d.c);
         let cg = d.c / d.g;
-        let m = d.m();
-        let mut dx = vec![0f32; x.len()];
-        // Per (sample, channel): Σ dy·x̂ and Σ dy, reduced over samples afterwards.
+        let m = d.m().max(1) as f64;
+        let mut out = vec![0f32; x.len() + 2 * d.c];
+        let (dx, _) = out.split_at_mut(x.len());
+        // Per (sample, channel): Σ e·x̂ and Σ e (e: dy through the ReLU), reduced over
+        // samples afterwards.
         let mut partial = vec![0f64; d.n * d.c * 2];
-        dx.par_chunks_mut(m)
-            .zip(x.par_chunks(m))
-            .zip(dy.par_chunks(m))
-            .zip(partial.par_chunks_mut(cg * 2))
-            .enumerate()
-            .for_each(|(ng, (((dx, x), dy), part))| {
-                let (mean, rstd) = stats(x, self.eps);
-                let g = ng % d.g;
-                // dy through the ReLU, x̂, and the group sums of dx̂ and dx̂·x̂.
-                let (mut sum_d, mut sum_dx) = (0f64, 0f64);
-                for ci in 0..cg {
-                    let c = g * cg + ci;
-                    let (mut sg, mut sb) = (0f64, 0f64);
-                    for k in ci * d.s..(ci + 1) * d.s {
-                        let xhat = (x[k] - mean) * rstd;
-                        let mut e = dy[k];
+        dx.par_chunks_mut(d.per())
+            .zip(x.par_chunks(d.per()))
+            .zip(dy.par_chunks(d.per()))
+            .zip(partial.par_chunks_mut(d.c * 2))
+            .for_each(|(((dx, x), dy), part)| {
+                let (mean, rstd) = stats(&d, x, self.eps);
+                let mean_c: Vec<f32> = (0..d.c).map(|c| mean[c / cg]).collect();
+                let rstd_c: Vec<f32> = (0..d.c).map(|c| rstd[c / cg]).collect();
+                let (sg, sb) = part.split_at_mut(d.c);
+                // Pass 1: e into dx, and the per-channel sums.
+                let (mut sgf, mut sbf) = (vec![0f32; d.c], vec![0f32; d.c]);
+                for ((dx, x), dy) in dx
+                    .chunks_exact_mut(d.c)
+                    .zip(x.chunks_exact(d.c))
+                    .zip(dy.chunks_exact(d.c))
+                {
+                    for c in 0..d.c {
+                        let xhat = (x[c] - mean_c[c]) * rstd_c[c];
+                        let mut e = dy[c];
                         if self.relu && xhat * gamma[c] + beta[c] <= 0.0 {
                             e = 0.0;
                         }
-                        sg += f64::from(e * xhat);
-                        sb += f64::from(e);
-                        let dxhat = e * gamma[c];
-                        sum_d += f64::from(dxhat);
-                        sum_dx += f64::from(dxhat * xhat);
-                        dx[k] = dxhat;
+                        dx[c] = e;
+                        sgf[c] += e * xhat;
+                        sbf[c] += e;
                     }
-                    part[ci * 2] = sg;
-                    part[ci * 2 + 1] = sb;
+                    // Flush the f32 partial sums into f64 every row keeps their error small.
+                    for c in 0..d.c {
+                        sg[c] += f64::from(sgf[c]);
+                        sb[c] += f64::from(sbf[c]);
+                    }
+                    sgf.fill(0.0);
+                    sbf.fill(0.0);
                 }
-                let mean_d = (sum_d / m as f64) as f32;
-                let mean_dx = (sum_dx / m as f64) as f32;
-                for k in 0..m {
-                    let xhat = (x[k] - mean) * rstd;
-                    dx[k] = rstd * (dx[k] - mean_d - xhat * mean_dx);
+                // Group sums of dx̂ = e·γ and dx̂·x̂.
+                let mut mean_d = vec![0f32; d.g];
+                let mut mean_dx = vec![0f32; d.g];
+                for g in 0..d.g {
+                    let (mut s_d, mut s_dx) = (0f64, 0f64);
+                    for c in g * cg..(g + 1) * cg {
+                        s_d += f64::from(gamma[c]) * sb[c];
+                        s_dx += f64::from(gamma[c]) * sg[c];
+                    }
+                    mean_d[g] = (s_d / m) as f32;
+                    mean_dx[g] = (s_dx / m) as f32;
+                }
+                let md_c: Vec<f32> = (0..d.c).map(|c| mean_d[c / cg]).collect();
+                let mdx_c: Vec<f32> = (0..d.c).map(|c| mean_dx[c / cg]).collect();
+                // Pass 2: dx = 1/σ · (e·γ − mean(dx̂) − x̂ · mean(dx̂·x̂)).
+                for (dx, x) in dx.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
+                    for c in 0..d.c {
+                        let xhat = (x[c] - mean_c[c]) * rstd_c[c];
+                        dx[c] = rstd_c[c] * (dx[c] * gamma[c] - md_c[c] - xhat * mdx_c[c]);
+                    }
                 }
             });
-        let mut out = dx;
         let (mut dgamma, mut dbeta) = (vec![0f64; d.c], vec![0f64; d.c]);
-        for n in 0..d.n {
+        for part in partial.chunks(2 * d.c) {
             for c in 0..d.c {
-                dgamma[c] += partial[(n * d.c + c) * 2];
-                dbeta[c] += partial[(n * d.c + c) * 2 + 1];
+                dgamma[c] += part[c];
+                dbeta[c] += part[d.c + c];
             }
         }
-        out.extend(dgamma.iter().map(|&v| v as f32));
-        out.extend(dbeta.iter().map(|&v| v as f32));
+        let tail = &mut out[x.len()..];
+        for c in 0..d.c {
+            tail[c] = dgamma[c] as f32;
+            tail[d.c + c] = dbeta[c] as f32;
+        }
         let len = out.len();
         Ok((CpuStorage::F32(out), Shape::from(len)))
     }
 }
 
-/// `MaxPool2d(3, stride=2, padding=1)` (PyTorch's −∞ padding), `[N, C, H, W]`.
-pub fn max_pool_3x3_s2(x: &Tensor) -> candle_core::Result<Tensor> {
+/// `MaxPool2d(3, stride=2, padding=1)` (PyTorch's −∞ padding) of a channels-last
+/// `[N, H, W, C]`.
+pub fn max_pool_3x3_s2_nhwc(x: &Tensor) -> candle_core::Result<Tensor> {
     x.contiguous()?.apply_op1(MaxPool)
 }
 
@@ -248,31 +296,31 @@ fn pooled(side: usize) -> usize {
     (side - 1) / 2 + 1
 }
 
-/// For each output value, the flat index (in its (n, c) plane) of the input it takes.
-fn argmax(x: &[f32], h: usize, w: usize) -> Vec<u32> {
+/// For each output value of one sample (`x` `[H, W, C]`), the flat index (in the sample) of
+/// the input it takes: the first maximum of its window in row-major order, as PyTorch; a NaN
+/// propagates.
+fn argmax(x: &[f32], h: usize, w: usize, c: usize) -> Vec<u32> {
     let (oh, ow) = (pooled(h), pooled(w));
-    let planes = x.len() / (h * w).max(1);
-    let mut idx = vec![0u32; planes * oh * ow];
-    idx.par_chunks_mut(oh * ow)
-        .zip(x.par_chunks(h * w))
-        .for_each(|(idx, x)| {
-            for oy in 0..oh {
-                for ox in 0..ow {
-                    let (mut best, mut at) = (f32::NEG_INFINITY, usize::MAX);
-                    for y in (2 * oy).saturating_sub(1)..(2 * oy + 2).min(h) {
-                        for xx in (2 * ox).saturating_sub(1)..(2 * ox + 2).min(w) {
-                            let v = x[y * w + xx];
-                            // The first maximum, as PyTorch; a NaN propagates.
-                            if at == usize::MAX || v > best || (v.is_nan() && !best.is_nan()) {
-                                best = v;
-                                at = y * w + xx;
-                            }
+    let mut idx = vec![u32::MAX; oh * ow * c];
+    let mut best = vec![f32::NEG_INFINITY; c];
+    for oy in 0..oh {
+        for ox in 0..ow {
+            let at = &mut idx[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
+            for y in (2 * oy).saturating_sub(1)..(2 * oy + 2).min(h) {
+                for xx in (2 * ox).saturating_sub(1)..(2 * ox + 2).min(w) {
+                    let base = (y * w + xx) * c;
+                    let v = &x[base..base + c];
+                    for ch in 0..c {
+                        let (b, vi) = (best[ch], v[ch]);
+                        if at[ch] == u32::MAX || vi > b || (vi.is_nan() && !b.is_nan()) {
+                            best[ch] = vi;
+                            at[ch] = (base + ch) as u32;
                         }
                     }
-                    idx[oy * ow + ox] = at as u32;
                 }
             }
-        });
+        }
+    }
     idx
 }
 
@@ -280,20 +328,22 @@ struct MaxPool;
 
 impl CustomOp1 for MaxPool {
     fn name(&self) -> &'static str {
-        "scaledp-max-pool"
+        "scaledp-max-pool-nhwc"
     }
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
-        let (n, c, h, w) = l.shape().dims4()?;
+        let (n, h, w, c) = l.shape().dims4()?;
         let x = values(s, l)?;
-        let idx = argmax(x, h, w);
         let (oh, ow) = (pooled(h), pooled(w));
-        let y: Vec<f32> = idx
-            .iter()
-            .enumerate()
-            .map(|(i, &k)| x[i / (oh * ow) * h * w + k as usize])
-            .collect();
-        Ok((CpuStorage::F32(y), Shape::from((n, c, oh, ow))))
+        let mut y = vec![0f32; n * oh * ow * c];
+        y.par_chunks_mut(oh * ow * c)
+            .zip(x.par_chunks(h * w * c))
+            .for_each(|(y, x)| {
+                for (y, &k) in y.iter_mut().zip(&argmax(x, h, w, c)) {
+                    *y = x[k as usize];
+                }
+            });
+        Ok((CpuStorage::F32(y), Shape::from((n, oh, ow, c))))
     }
 
     fn bwd(&self, x: &Tensor, _res: &Tensor, grad: &Tensor) -> candle_core::Result<Option<Tensor>> {
@@ -306,7 +356,7 @@ struct MaxPoolGrad;
 
 impl CustomOp2 for MaxPoolGrad {
     fn name(&self) -> &'static str {
-        "scaledp-max-pool-grad"
+        "scaledp-max-pool-nhwc-grad"
     }
 
     fn cpu_fwd(
@@ -316,16 +366,90 @@ impl CustomOp2 for MaxPoolGrad {
         s2: &CpuStorage,
         l2: &Layout,
     ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let (_, _, h, w) = l1.shape().dims4()?;
+        let (_, h, w, c) = l1.shape().dims4()?;
         let (x, dy) = (values(s1, l1)?, values(s2, l2)?);
-        let idx = argmax(x, h, w);
-        let per = pooled(h) * pooled(w);
+        let per = pooled(h) * pooled(w) * c;
         let mut dx = vec![0f32; x.len()];
-        dx.par_chunks_mut(h * w)
-            .zip(idx.par_chunks(per).zip(dy.par_chunks(per)))
-            .for_each(|(dx, (idx, dy))| {
-                for (&k, &g) in idx.iter().zip(dy) {
+        dx.par_chunks_mut(h * w * c)
+            .zip(x.par_chunks(h * w * c).zip(dy.par_chunks(per)))
+            .for_each(|(dx, (x, dy))| {
+                for (&k, &g) in argmax(x, h, w, c).iter().zip(dy) {
                     dx[k as usize] += g;
+                }
+            });
+        Ok((CpuStorage::F32(dx), l1.shape().clone()))
+    }
+}
+
+/// `relu(a + b)` of two tensors of one shape (a residual block's output), one pass; its
+/// backward passes the gradient where the output is positive to both inputs.
+pub fn add_relu(a: &Tensor, b: &Tensor) -> candle_core::Result<Tensor> {
+    a.contiguous()?.apply_op2(&b.contiguous()?, AddRelu)
+}
+
+struct AddRelu;
+
+impl CustomOp2 for AddRelu {
+    fn name(&self) -> &'static str {
+        "scaledp-add-relu"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let (a, b) = (values(s1, l1)?, values(s2, l2)?);
+        if a.len() != b.len() {
+            candle_core::bail!("add_relu: {:?} and {:?}", l1.dims(), l2.dims());
+        }
+        let mut y = vec![0f32; a.len()];
+        y.par_chunks_mut(1 << 14)
+            .zip(a.par_chunks(1 << 14).zip(b.par_chunks(1 << 14)))
+            .for_each(|(y, (a, b))| {
+                for ((y, &a), &b) in y.iter_mut().zip(a).zip(b) {
+                    *y = (a + b).max(0.0);
+                }
+            });
+        Ok((CpuStorage::F32(y), l1.shape().clone()))
+    }
+
+    fn bwd(
+        &self,
+        _a: &Tensor,
+        _b: &Tensor,
+        res: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
+        let g = res.apply_op2_no_bwd(&grad.contiguous()?, &ReluGrad)?;
+        Ok((Some(g.clone()), Some(g)))
+    }
+}
+
+/// `dy` where `y` (arg 1) is positive, else 0; `dy` is arg 2.
+struct ReluGrad;
+
+impl CustomOp2 for ReluGrad {
+    fn name(&self) -> &'static str {
+        "scaledp-relu-grad"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
+        let (y, dy) = (values(s1, l1)?, values(s2, l2)?);
+        let mut dx = vec![0f32; y.len()];
+        dx.par_chunks_mut(1 << 14)
+            .zip(y.par_chunks(1 << 14).zip(dy.par_chunks(1 << 14)))
+            .for_each(|(dx, (y, dy))| {
+                for ((dx, &y), &g) in dx.iter_mut().zip(y).zip(dy) {
+                    *dx = if y > 0.0 { g } else { 0.0 };
                 }
             });
         Ok((CpuStorage::F32(dx), l1.shape().clone()))
@@ -345,35 +469,27 @@ mod tests {
             .unwrap_or(f32::INFINITY)
     }
 
-    /// The fused op and its gradients against the composed one (which candle differentiates).
+    /// The fused op and its gradients against the composed one (which candle differentiates)
+    /// on the NCHW view of the same values.
     #[test]
     fn fused_group_norm_matches_the_composed_one() -> candle_core::Result<()> {
         let dev = Device::Cpu;
         for relu in [false, true] {
-            let x = Var::from_tensor(&(Tensor::randn(0f32, 1., (3, 8, 5, 4), &dev)? * 3.0)?)?;
+            let x = Var::from_tensor(&(Tensor::randn(0f32, 1., (3, 5, 4, 8), &dev)? * 3.0)?)?;
             let g = Var::from_tensor(&Tensor::randn(1f32, 0.5, 8, &dev)?)?;
             let b = Var::from_tensor(&Tensor::randn(0f32, 0.5, 8, &dev)?)?;
-            let ours = group_norm(x.as_tensor(), g.as_tensor(), b.as_tensor(), 2, 1e-5, relu)?;
-            // The composed path, forced by a non-CPU-looking call: build it by hand.
-            let theirs = {
-                let xg = x.as_tensor().reshape((3, 2, ()))?;
-                let mean = xg.mean_keepdim(2)?;
-                let xc = xg.broadcast_sub(&mean)?;
-                let var = xc.sqr()?.mean_keepdim(2)?;
-                let xhat = xc
-                    .broadcast_div(&(var + 1e-5)?.sqrt()?)?
-                    .reshape((3, 8, 5, 4))?;
-                let y = xhat
-                    .broadcast_mul(&g.as_tensor().reshape((1, 8, 1, 1))?)?
-                    .broadcast_add(&b.as_tensor().reshape((1, 8, 1, 1))?)?;
-                if relu {
-                    y.relu()?
-                } else {
-                    y
-                }
-            };
+            let ours = group_norm_nhwc(x.as_tensor(), g.as_tensor(), b.as_tensor(), 2, 1e-5, relu)?;
+            let theirs = group_norm_nchw(
+                &x.as_tensor().permute((0, 3, 1, 2))?,
+                g.as_tensor(),
+                b.as_tensor(),
+                2,
+                1e-5,
+                relu,
+            )?
+            .permute((0, 2, 3, 1))?;
             assert!(max_diff(&ours, &theirs) < 1e-5);
-            let m = Tensor::randn(0f32, 1., (3, 8, 5, 4), &dev)?;
+            let m = Tensor::randn(0f32, 1., (3, 5, 4, 8), &dev)?;
             let g1 = (ours * &m)?.sum_all()?.backward()?;
             let g2 = (theirs * &m)?.sum_all()?.backward()?;
             for v in [&x, &g, &b] {
@@ -390,24 +506,55 @@ mod tests {
     fn max_pool_matches_pytorchs_padding_and_routes_gradients_to_the_max() -> candle_core::Result<()>
     {
         let dev = Device::Cpu;
-        let x = Tensor::arange(0f32, 35., &dev)?.reshape((1, 1, 5, 7))?;
-        let y = max_pool_3x3_s2(&x)?;
-        assert_eq!(y.dims(), &[1, 1, 3, 4]);
+        // Two channels: c0 = 0..35, c1 = its negation (a different maximum per window).
+        let plane = Tensor::arange(0f32, 35., &dev)?.reshape((1, 5, 7, 1))?;
+        let x = Tensor::cat(&[&plane, &plane.neg()?], 3)?;
+        let y = max_pool_3x3_s2_nhwc(&x)?;
+        assert_eq!(y.dims(), &[1, 3, 4, 2]);
         // Window of output (0, 0) covers rows 0..2, cols 0..2: max is x[1][1] = 8.
-        let v = y.flatten_all()?.to_vec1::<f32>()?;
+        let v = y.narrow(3, 0, 1)?.flatten_all()?.to_vec1::<f32>()?;
         assert_eq!(
             v,
             vec![8., 10., 12., 13., 22., 24., 26., 27., 29., 31., 33., 34.]
         );
+        // Of the negated plane, the window's first (top-left) value.
+        let v = y.narrow(3, 1, 1)?.flatten_all()?.to_vec1::<f32>()?;
+        assert_eq!(
+            v,
+            vec![-0., -1., -3., -5., -7., -8., -10., -12., -21., -22., -24., -26.]
+        );
         let xv = Var::from_tensor(&x)?;
-        let g = max_pool_3x3_s2(xv.as_tensor())?.sum_all()?.backward()?;
+        let g = max_pool_3x3_s2_nhwc(xv.as_tensor())?
+            .sum_all()?
+            .backward()?;
         let dx = g.get(xv.as_tensor()).map(|t| t.flatten_all()).transpose()?;
         let dx = dx
             .map(|t| t.to_vec1::<f32>())
             .transpose()?
             .unwrap_or_default();
-        assert_eq!(dx.iter().sum::<f32>(), 12.0);
-        assert_eq!(dx[8], 1.0);
+        assert_eq!(dx.iter().sum::<f32>(), 24.0);
+        // x[1][1] of channel 0 is flat index (1·7 + 1)·2.
+        assert_eq!(dx[16], 1.0);
+        Ok(())
+    }
+
+    #[test]
+    fn add_relu_and_its_gradient_match_candles() -> candle_core::Result<()> {
+        let dev = Device::Cpu;
+        let a = Var::from_tensor(&Tensor::randn(0f32, 1., (4, 3, 5), &dev)?)?;
+        let b = Var::from_tensor(&Tensor::randn(0f32, 1., (4, 3, 5), &dev)?)?;
+        let ours = add_relu(a.as_tensor(), b.as_tensor())?;
+        let theirs = (a.as_tensor() + b.as_tensor())?.relu()?;
+        assert!(max_diff(&ours, &theirs) == 0.0);
+        let m = Tensor::randn(0f32, 1., (4, 3, 5), &dev)?;
+        let g1 = (ours * &m)?.sum_all()?.backward()?;
+        let g2 = (theirs * &m)?.sum_all()?.backward()?;
+        for v in [&a, &b] {
+            let (Some(x), Some(y)) = (g1.get(v.as_tensor()), g2.get(v.as_tensor())) else {
+                panic!("no gradient");
+            };
+            assert!(max_diff(x, y) < 1e-6);
+        }
         Ok(())
     }
 }

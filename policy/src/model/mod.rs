@@ -3,6 +3,7 @@
 //! (`tests/py/scaledp_torch.py`).
 
 pub(crate) mod conv;
+pub(crate) mod cpu;
 pub(crate) mod denoiser;
 pub(crate) mod encoder;
 pub(crate) mod fused;
@@ -52,6 +53,9 @@ pub struct ScaleDp {
 impl ScaleDp {
     fn build(vb: &Builder, cfg: &ModelConfig, device: &Device) -> Result<Self> {
         cfg.validate()?;
+        if device.is_cpu() {
+            cpu::init_threads();
+        }
         let encoders = (0..cfg.cameras.len())
             .map(|i| {
                 ObsEncoder::new(
@@ -207,6 +211,7 @@ impl ScaleDp {
                 (w, h),
                 c.crop_size(),
                 crop,
+                self.device.is_cpu(),
                 rng,
                 &self.device,
             )?;

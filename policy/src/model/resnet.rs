@@ -6,7 +6,7 @@
 use candle_core::Tensor;
 
 use crate::error::Result;
-use crate::model::conv::conv2d;
+use crate::model::conv::conv2d_nhwc;
 use crate::model::fused;
 use crate::model::params::{Builder, Init};
 
@@ -31,7 +31,11 @@ impl Conv {
         })
     }
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        Ok(conv2d(x, &self.weight, self.stride, self.padding)?)
+        Ok(if x.device().is_cpu() {
+            conv2d_nhwc(x, &self.weight, self.stride, self.padding)?
+        } else {
+            x.conv2d(&self.weight, self.padding, self.stride, 1, 1)?
+        })
     }
 }
 
@@ -54,14 +58,12 @@ impl GroupNorm {
 
     /// The norm, then a ReLU when `relu`.
     fn forward(&self, x: &Tensor, relu: bool) -> Result<Tensor> {
-        Ok(fused::group_norm(
-            x,
-            &self.weight,
-            &self.bias,
-            self.groups,
-            GN_EPS,
-            relu,
-        )?)
+        let (w, b, g) = (&self.weight, &self.bias, self.groups);
+        Ok(if x.device().is_cpu() {
+            fused::group_norm_nhwc(x, w, b, g, GN_EPS, relu)?
+        } else {
+            fused::group_norm_nchw(x, w, b, g, GN_EPS, relu)?
+        })
     }
 }
 
@@ -101,7 +103,11 @@ impl BasicBlock {
             Some((conv, norm)) => norm.forward(&conv.forward(x)?, false)?,
             None => x.clone(),
         };
-        Ok((y + skip)?.relu()?)
+        Ok(if y.device().is_cpu() {
+            fused::add_relu(&y, &skip)?
+        } else {
+            (y + skip)?.relu()?
+        })
     }
 }
 
@@ -136,7 +142,7 @@ impl ResNet18 {
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let x = self.bn1.forward(&self.conv1.forward(x)?, true)?;
         let mut x = if x.device().is_cpu() {
-            fused::max_pool_3x3_s2(&x)?
+            fused::max_pool_3x3_s2_nhwc(&x)?
         } else {
             max_pool_3x3_s2(&x)?
         };

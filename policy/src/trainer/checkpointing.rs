@@ -87,7 +87,7 @@ pub(super) fn config_for(
 }
 
 /// A second model whose weights are copies of `params` (the EMA starts at the weights).
-pub(super) fn copy_model(
+pub(crate) fn copy_model(
     cfg: &ModelConfig,
     params: &[Param],
     device: &Device,

@@ -5,7 +5,7 @@
 //! (seed, k), so a resumed run draws exactly what an uninterrupted one would; the data order is
 //! the loader's, resumed from its saved position.
 
-mod checkpointing;
+pub(crate) mod checkpointing;
 pub(crate) mod optim;
 mod options;
 mod validate;
@@ -291,7 +291,16 @@ impl Trainer {
             self.opts.warmup_steps,
             self.opts.steps,
         );
-        let (loss, grads) = self.loss_and_grads(&batch, &mut rng)?;
+        let micro = self.opts.micro_batch;
+        let (loss, grads) = loss_and_grads(
+            &self.model,
+            &self.scheduler,
+            self.optim.params(),
+            &batch,
+            micro,
+            &mut rng,
+            &mut Phases::default(),
+        )?;
         if !loss.is_finite() {
             return Err(Error::Diverged {
                 step: self.step + 1,
@@ -326,77 +335,6 @@ impl Trainer {
         };
         self.log(&serde_json::json!({"kind": "train", "record": &rec}))?;
         Ok(rec)
-    }
-
-    /// The batch's loss and the gradients of every parameter (aligned with the optimizer's),
-    /// summed over micro-batches.
-    fn loss_and_grads(
-        &self,
-        batch: &Batch,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<(f32, Vec<Option<Tensor>>)> {
-        let c = &self.cfg.model;
-        let (b, to, ch, a) = (batch.len, c.obs_horizon, c.action_chunk, c.action_dim);
-        let per_img = to * c.cameras.len() * 3 * c.image_width as usize * c.image_height as usize;
-        let valid = batch.action_is_pad.iter().filter(|p| !**p).count();
-        let denom = (valid.max(1) * a) as f64;
-        let step = self.opts.micro_batch.unwrap_or(b).clamp(1, b.max(1));
-        let mut total = 0f32;
-        let params = self.optim.params();
-        let mut grads: Vec<Option<Tensor>> = vec![None; params.len()];
-        for s0 in (0..b).step_by(step) {
-            let n = step.min(b - s0);
-            let loss = self.loss(batch, s0, n, per_img, denom, rng)?;
-            total += loss.to_scalar::<f32>()?;
-            let mut g = loss.backward()?;
-            for (acc, p) in grads.iter_mut().zip(params) {
-                if let Some(gi) = g.remove(p.var.as_tensor()) {
-                    *acc = Some(match acc.take() {
-                        None => gi,
-                        Some(prev) => (prev + gi)?,
-                    });
-                }
-            }
-        }
-        let _ = (to, ch);
-        Ok((total, grads))
-    }
-
-    /// The summed masked squared error of samples `s0 .. s0 + n`, divided by `denom`.
-    fn loss(
-        &self,
-        batch: &Batch,
-        s0: usize,
-        n: usize,
-        per_img: usize,
-        denom: f64,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<Tensor> {
-        let c = &self.cfg.model;
-        let (to, ch, a, s) = (c.obs_horizon, c.action_chunk, c.action_dim, c.state_dim);
-        let dev = self.model.device();
-        let images = &batch.images[s0 * per_img..(s0 + n) * per_img];
-        let state = &batch.state[s0 * to * s..(s0 + n) * to * s];
-        let cond = self.model.encode(images, state, n, Crop::Random, rng)?;
-        let t: Vec<usize> = (0..n)
-            .map(|_| rng.random_range(0..self.scheduler.train_steps()))
-            .collect();
-        let noise = Tensor::from_vec(randn(rng, n * ch * a), (n, ch, a), dev)?;
-        let x0 = Tensor::from_slice(
-            &batch.action[s0 * ch * a..(s0 + n) * ch * a],
-            (n, ch, a),
-            dev,
-        )?;
-        let noisy = self.scheduler.add_noise(&x0, &noise, &t)?;
-        let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
-        let eps = self.model.predict_noise(&noisy, &tf, &cond)?;
-        let mask: Vec<f32> = batch.action_is_pad[s0 * ch..(s0 + n) * ch]
-            .iter()
-            .map(|&p| if p { 0.0 } else { 1.0 })
-            .collect();
-        let mask = Tensor::from_vec(mask, (n, ch, 1), dev)?;
-        let se = (eps - noise)?.sqr()?.broadcast_mul(&mask)?;
-        Ok((se.sum_all()? / denom)?)
     }
 
     /// Validates on the held-out episodes (`None` without any).
@@ -480,6 +418,102 @@ impl Trainer {
             .and_then(|()| self.metrics.flush())
             .map_err(|e| Error::io(&path, e))
     }
+}
+
+/// Where a step's time went (s), summed over its micro-batches.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Phases {
+    /// Cropping the images and the encoders' forward passes.
+    pub encode_s: f64,
+    /// The denoiser's forward pass and the loss.
+    pub denoise_s: f64,
+    /// The backward pass (and summing micro-batch gradients).
+    pub backward_s: f64,
+}
+
+/// The batch's loss and the gradients of every parameter in `params` (`None` for one the loss
+/// does not reach), summed over micro-batches of at most `micro` samples; the draws (crops,
+/// timesteps, noise) come from `rng`.
+pub(crate) fn loss_and_grads(
+    model: &ScaleDp,
+    scheduler: &NoiseScheduler,
+    params: &[Param],
+    batch: &Batch,
+    micro: Option<usize>,
+    rng: &mut ChaCha8Rng,
+    phases: &mut Phases,
+) -> Result<(f32, Vec<Option<Tensor>>)> {
+    let c = model.config();
+    let (b, a) = (batch.len, c.action_dim);
+    let per_img =
+        c.obs_horizon * c.cameras.len() * 3 * c.image_width as usize * c.image_height as usize;
+    let valid = batch.action_is_pad.iter().filter(|p| !**p).count();
+    let denom = (valid.max(1) * a) as f64;
+    let step = micro.unwrap_or(b).clamp(1, b.max(1));
+    let mut total = 0f32;
+    let mut grads: Vec<Option<Tensor>> = vec![None; params.len()];
+    for s0 in (0..b).step_by(step) {
+        let n = step.min(b - s0);
+        let loss = micro_loss(model, scheduler, batch, s0, n, per_img, denom, rng, phases)?;
+        total += loss.to_scalar::<f32>()?;
+        let t0 = Instant::now();
+        let mut g = loss.backward()?;
+        for (acc, p) in grads.iter_mut().zip(params) {
+            if let Some(gi) = g.remove(p.var.as_tensor()) {
+                *acc = Some(match acc.take() {
+                    None => gi,
+                    Some(prev) => (prev + gi)?,
+                });
+            }
+        }
+        phases.backward_s += t0.elapsed().as_secs_f64();
+    }
+    Ok((total, grads))
+}
+
+/// The summed masked squared error of samples `s0 .. s0 + n`, divided by `denom`.
+#[allow(clippy::too_many_arguments)]
+fn micro_loss(
+    model: &ScaleDp,
+    scheduler: &NoiseScheduler,
+    batch: &Batch,
+    s0: usize,
+    n: usize,
+    per_img: usize,
+    denom: f64,
+    rng: &mut ChaCha8Rng,
+    phases: &mut Phases,
+) -> Result<Tensor> {
+    let c = model.config();
+    let (to, ch, a, s) = (c.obs_horizon, c.action_chunk, c.action_dim, c.state_dim);
+    let dev = model.device();
+    let t0 = Instant::now();
+    let images = &batch.images[s0 * per_img..(s0 + n) * per_img];
+    let state = &batch.state[s0 * to * s..(s0 + n) * to * s];
+    let cond = model.encode(images, state, n, Crop::Random, rng)?;
+    let t1 = Instant::now();
+    let t: Vec<usize> = (0..n)
+        .map(|_| rng.random_range(0..scheduler.train_steps()))
+        .collect();
+    let noise = Tensor::from_vec(randn(rng, n * ch * a), (n, ch, a), dev)?;
+    let x0 = Tensor::from_slice(
+        &batch.action[s0 * ch * a..(s0 + n) * ch * a],
+        (n, ch, a),
+        dev,
+    )?;
+    let noisy = scheduler.add_noise(&x0, &noise, &t)?;
+    let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
+    let eps = model.predict_noise(&noisy, &tf, &cond)?;
+    let mask: Vec<f32> = batch.action_is_pad[s0 * ch..(s0 + n) * ch]
+        .iter()
+        .map(|&p| if p { 0.0 } else { 1.0 })
+        .collect();
+    let mask = Tensor::from_vec(mask, (n, ch, 1), dev)?;
+    let se = (eps - noise)?.sqr()?.broadcast_mul(&mask)?;
+    let loss = (se.sum_all()? / denom)?;
+    phases.encode_s += (t1 - t0).as_secs_f64();
+    phases.denoise_s += t1.elapsed().as_secs_f64();
+    Ok(loss)
 }
 
 /// Refuses a batch holding a non-finite state or action value, naming its sample.

@@ -1,0 +1,119 @@
+//! What the fused CPU kernels share: a row-major GEMM on slices (the `gemm` crate candle
+//! itself multiplies with, on rayon's threads), a reusable scratch buffer for patch matrices,
+//! and the thread setup of a training or inference process.
+
+use std::cell::RefCell;
+use std::sync::Once;
+
+use candle_core::{CpuStorage, Layout};
+
+/// The contiguous f32 values of a storage with a contiguous layout.
+pub(crate) fn values<'a>(s: &'a CpuStorage, l: &Layout) -> candle_core::Result<&'a [f32]> {
+    let data = s.as_slice::<f32>()?;
+    match l.contiguous_offsets() {
+        Some((start, end)) => Ok(&data[start..end]),
+        None => candle_core::bail!("fused op: operands must be contiguous"),
+    }
+}
+
+/// `c (+)= op(a) · op(b)`, all row-major: `a` is `[m, k]` (stored `[k, m]` when `a_t`), `b` is
+/// `[k, n]` (stored `[n, k]` when `b_t`), `c` is `[m, n]`; `accumulate` adds to `c` instead of
+/// overwriting it. Large products run on rayon's threads.
+#[allow(clippy::too_many_arguments, unsafe_code)]
+pub(crate) fn gemm(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &[f32],
+    a_t: bool,
+    b: &[f32],
+    b_t: bool,
+    c: &mut [f32],
+    accumulate: bool,
+) {
+    assert!(a.len() >= m * k && b.len() >= k * n && c.len() >= m * n);
+    if m == 0 || n == 0 {
+        return;
+    }
+    if k == 0 {
+        if !accumulate {
+            c[..m * n].fill(0.0);
+        }
+        return;
+    }
+    let (a_rs, a_cs) = if a_t {
+        (1, m as isize)
+    } else {
+        (k as isize, 1)
+    };
+    let (b_rs, b_cs) = if b_t {
+        (1, k as isize)
+    } else {
+        (n as isize, 1)
+    };
+    let par = if m * n * k >= 1 << 18 {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
+    };
+    // SAFETY: the asserts above keep every index the strides reach inside the slices; `c`
+    // does not alias `a` or `b` (a `&mut` borrow).
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            c.as_mut_ptr(),
+            1,
+            n as isize,
+            accumulate,
+            a.as_ptr(),
+            a_cs,
+            a_rs,
+            b.as_ptr(),
+            b_cs,
+            b_rs,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            par,
+        );
+    }
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Runs `f` with a scratch buffer of at least `len` values (contents unspecified), kept
+/// between calls on this thread: patch matrices are rebuilt every call, and allocating them
+/// anew each time costs a page fault per 4 KiB (the kernel zeroes every page).
+pub(crate) fn with_scratch<R>(len: usize, f: impl FnOnce(&mut [f32]) -> R) -> R {
+    let mut buf = SCRATCH.with(|s| std::mem::take(&mut *s.borrow_mut()));
+    if buf.len() < len {
+        buf = vec![0f32; len];
+    }
+    let r = f(&mut buf[..len]);
+    SCRATCH.with(|s| *s.borrow_mut() = buf);
+    r
+}
+
+static THREADS: Once = Once::new();
+
+/// Sets up the process's CPU threads for training and inference, once: candle's
+/// element-wise ops get no thread pool of their own (`CANDLE_NUM_THREADS=1`, unless the
+/// variable is set already), so matrix products and the fused kernels share rayon's pool.
+///
+/// candle 0.11 runs large element-wise ops on a second, spinning pool of its own beside
+/// rayon's: on a two-core machine its waiting threads took the cores from the threads doing
+/// the work (half of a ScaleDP-Ti step went to spinning, and the step ran on about one core).
+/// Called before the model's first op; the variable is read when candle's pool is created.
+pub fn init_threads() {
+    THREADS.call_once(|| {
+        if std::env::var_os("CANDLE_NUM_THREADS").is_none() {
+            std::env::set_var("CANDLE_NUM_THREADS", "1");
+        }
+    });
+}
