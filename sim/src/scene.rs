@@ -92,7 +92,7 @@ pub fn flange_from_fingertips(arm: &Arm) -> DMat4 {
 /// A posture near which each model reaches down to the table in front of it.
 fn seed_posture(model: RobotModel) -> Vec<f64> {
     match model {
-        RobotModel::Fr3 | RobotModel::Panda => vec![0.0, -0.3, 0.0, -2.2, 0.0, 1.95, -0.785],
+        RobotModel::Fr3 | RobotModel::Panda => vec![0.0, -0.3, 0.0, -2.2, 0.0, 1.95, 0.785],
         RobotModel::Ur5 | RobotModel::Ur5e => vec![0.0, -1.9, 1.9, -1.57, -1.57, 0.0],
     }
 }
@@ -113,9 +113,12 @@ impl Scene {
                 };
                 let world_from_base = DMat4::from_translation(DVec3::new(0.0, y, TABLE_Z_M))
                     * DMat4::from_rotation_z(turn);
-                // Yaw chosen near each model's seed posture, so reaching it needs no wrist turn.
+                // Yaw (world) chosen near each model's seed posture, so reaching it needs no wrist
+                // turn: the Franka Hand's fingers close along y as in Franka's ready pose (TCP yaw
+                // 0 in the base frame), the Robotiq's along x (TCP yaw π/2 in the DH base frame).
+                // Both are far from the ±π wrap, like the roll.
                 let yaw = match arm.model {
-                    RobotModel::Fr3 | RobotModel::Panda => std::f64::consts::FRAC_PI_2,
+                    RobotModel::Fr3 | RobotModel::Panda => 0.0,
                     RobotModel::Ur5 | RobotModel::Ur5e => -std::f64::consts::FRAC_PI_2,
                 };
                 let grasp_rotation = DMat3::from_rotation_z(yaw)
