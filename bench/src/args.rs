@@ -15,6 +15,9 @@ pub enum BenchCommand {
     /// Run the training-data loader over a generated bimanual dataset and report samples/s,
     /// images/s, MB/s and peak memory against pure JPEG decoding and LeRobot's DataLoader.
     Load(BenchLoadArgs),
+    /// Train ScaleDP-Ti on a converted simulated dataset and report samples/s and the data-wait
+    /// share, beside the same model in PyTorch; DDIM latency per action chunk for Ti and S.
+    Train(BenchTrainArgs),
 }
 
 /// Chunk compression of the recorder under test.
@@ -135,6 +138,46 @@ pub struct BenchLoadArgs {
     /// Internal: the dataset of a --worker run.
     #[arg(long, hide = true)]
     pub dataset: Option<PathBuf>,
+}
+
+/// `scaledp bench train`.
+#[derive(Debug, Args)]
+pub struct BenchTrainArgs {
+    /// Simulated episodes converted into the dataset.
+    #[arg(long, default_value_t = 4)]
+    pub episodes: usize,
+    /// Seconds per episode.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Rig file, or the name of a shipped rig.
+    #[arg(long, default_value = "franka_2zed")]
+    pub rig: String,
+    /// Resize images to WxH before the crop (default: as the converter wrote them).
+    #[arg(long, value_name = "WxH")]
+    pub image_size: Option<String>,
+    /// Samples per step.
+    #[arg(long, default_value_t = 64)]
+    pub batch_size: usize,
+    /// Forward/backward at most this many samples at a time.
+    #[arg(long)]
+    pub micro_batch: Option<usize>,
+    /// Timed steps (after one warm-up step).
+    #[arg(long, default_value_t = 3)]
+    pub steps: usize,
+    /// DDIM chunks timed per model size.
+    #[arg(long, default_value_t = 20)]
+    pub latency_runs: usize,
+    /// Keep the recordings and the dataset here (default: a temporary directory).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Skip the PyTorch route.
+    #[arg(long)]
+    pub no_python: bool,
+    /// The Python of the PyTorch route (default: $SCALEDP_BENCH_PYTHON, else .venv-bench/bin/python
+    /// in the workspace holding the current directory, which `bash scripts/setup-bench-python.sh`
+    /// makes).
+    #[arg(long)]
+    pub python: Option<PathBuf>,
 }
 
 /// How the loader epoch of a `bench load --worker` child reads.

@@ -9,6 +9,9 @@
 //! - [`BenchCommand::Load`]: one shuffled loader epoch over a generated dataset; samples/s,
 //!   images/s, MB/s, peak memory, beside pure JPEG decoding, the Python module and LeRobot's
 //!   DataLoader, then a streaming epoch over a larger dataset.
+//! - [`BenchCommand::Train`]: ScaleDP-Ti training on a converted simulated dataset in process;
+//!   samples/s and the data-wait share, the same model in PyTorch from the same weights, and
+//!   DDIM-10 latency per chunk for Ti and S.
 //!
 //! A new benchmark is one more module and one more [`BenchCommand`] variant.
 //!
@@ -33,9 +36,11 @@ mod load;
 mod python;
 mod record;
 mod synth;
+mod train;
 
 pub use args::{
-    BenchCommand, BenchConvertArgs, BenchLoadArgs, BenchRecordArgs, Compression, WorkerMode,
+    BenchCommand, BenchConvertArgs, BenchLoadArgs, BenchRecordArgs, BenchTrainArgs, Compression,
+    WorkerMode,
 };
 
 /// How a benchmark that ran to the end went.
@@ -54,5 +59,6 @@ pub fn run(command: BenchCommand) -> anyhow::Result<Outcome> {
         BenchCommand::Record(args) => record::run(args),
         BenchCommand::Convert(args) => convert::run(args),
         BenchCommand::Load(args) => load::run(args),
+        BenchCommand::Train(args) => train::run(args),
     }
 }

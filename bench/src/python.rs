@@ -5,7 +5,8 @@
 //! for `bench load`, LeRobot's `LeRobotDataset` + torch `DataLoader` (`lerobot_baseline.py`)
 //! and our own loader through its Python module `scaledp_data` (`scaledp_data_epoch.py`, with
 //! the wheel `scripts/build-python.sh` builds unpacked onto `PYTHONPATH`), both on the
-//! benchmark Python. The interpreter: `--python`, else the venv's variable, else the venv in the
+//! benchmark Python; for `bench train`, the reference PyTorch ScaleDP module's training step
+//! (`bench_train_torch.py` + `scaledp_torch.py`) on the benchmark Python. The interpreter: `--python`, else the venv's variable, else the venv in the
 //! workspace found from the current directory upward (`scaledp_testkit::Venv`). A route that
 //! cannot run says why ([`NotRun`]); the benchmark prints that instead of a figure.
 
@@ -18,8 +19,8 @@ use scaledp_testkit::{measure, scaledp_data_wheel, workspace_from_current_dir, M
 
 /// A Python route's script, compiled in.
 pub struct Script {
-    name: &'static str,
-    text: &'static str,
+    pub(crate) name: &'static str,
+    pub(crate) text: &'static str,
 }
 
 /// `bench convert`'s baseline: recordings → parquet, one process.
@@ -80,15 +81,21 @@ impl Python {
         Ok(Python { exe, root, scripts })
     }
 
-    /// A command running `script` (written out on first use).
-    pub fn command(&self, script: &Script) -> Result<Process, NotRun> {
+    /// Writes `script` into the scripts' directory (once), for a script that imports it from
+    /// beside itself; returns its path.
+    pub fn install(&self, script: &Script) -> Result<PathBuf, NotRun> {
         let path = self.scripts.path().join(script.name);
         if !path.exists() {
             std::fs::write(&path, script.text)
                 .map_err(|e| NotRun::Failed(format!("writing {}: {e}", path.display())))?;
         }
+        Ok(path)
+    }
+
+    /// A command running `script` (written out on first use).
+    pub fn command(&self, script: &Script) -> Result<Process, NotRun> {
         let mut cmd = Process::new(&self.exe);
-        cmd.arg(path);
+        cmd.arg(self.install(script)?);
         Ok(cmd)
     }
 

@@ -77,6 +77,10 @@ pub struct TrainArgs {
     /// Print the parameter counts and stop.
     #[arg(long)]
     pub dry_run: bool,
+    /// Plot the loss, learning rate and validation errors in a rerun viewer: a new one, or the
+    /// one at URL (e.g. rerun+http://host:9876/proxy).
+    #[arg(long, value_name = "URL", num_args = 0..=1)]
+    pub view: Option<Option<String>>,
 }
 
 fn size(s: &str) -> Result<(u32, u32)> {
@@ -196,8 +200,34 @@ pub fn run(a: TrainArgs) -> Result<ExitStatus> {
     bar.set_style(indicatif::ProgressStyle::with_template(
         "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
     )?);
+    let curves = match &a.view {
+        Some(url) => Some(super::view::curves::Curves::start(
+            url.as_deref(),
+            &trainer.config().dataset,
+        )?),
+        None => None,
+    };
+    let mut view_error = None;
+    let mut show = |r: anyhow::Result<()>| {
+        if let Err(e) = r {
+            view_error.get_or_insert(e);
+        }
+    };
     let (mut wait, mut busy) = (0f64, 0f64);
     let summary = trainer.run(|e| {
+        if let Some(c) = &curves {
+            match &e {
+                Event::Step(r) => show(c.step(r.step, r.loss as f64, r.lr)),
+                Event::Validation(v) => {
+                    show(c.validation(v.step, "loss", v.loss as f64));
+                    show(c.validation(v.step, "action_mse", v.action_mse));
+                    for (n, err) in v.action_names.iter().zip(&v.action_mae_raw) {
+                        show(c.validation(v.step, &format!("mae_{n}"), *err));
+                    }
+                }
+                Event::Checkpoint(_) => {}
+            }
+        }
         if int.load(Ordering::Relaxed) {
             stop.store(true, Ordering::Relaxed);
         }
@@ -229,6 +259,12 @@ pub fn run(a: TrainArgs) -> Result<ExitStatus> {
         }
     })?;
     bar.finish_and_clear();
+    if let Some(c) = curves {
+        c.finish()?;
+    }
+    if let Some(e) = view_error {
+        eprintln!("warning: the viewer stopped taking the curves: {e:#}");
+    }
     println!(
         "{} steps, final loss {}, data wait {:.1} % of step time, checkpoint {}",
         summary.steps,

@@ -10,7 +10,7 @@ pub fn run(args: ViewArgs) -> Result<ExitStatus> {
     use scaledp_viewer::{Target, ViewOptions};
     if args.checkpoint.is_some() {
         anyhow::bail!(
-            "--checkpoint: predicted chunks need the policy's inference, which scaledp-policy does not have yet"
+            "--checkpoint: predicted chunks are not drawn by `view` yet; `scaledp predict CHECKPOINT DATASET --episode N --out predicted.csv` writes them beside the recorded ones"
         );
     }
     let target = match (&args.save, &args.connect) {
@@ -178,5 +178,64 @@ pub mod live {
     /// Nothing to finish.
     pub fn finish() -> Result<()> {
         Ok(())
+    }
+}
+
+/// `scaledp train --view`: the loss, learning rate and validation figures on a `step` timeline.
+#[cfg(feature = "view")]
+pub mod curves {
+    use anyhow::Result;
+    use scaledp_viewer::{Target, TrainingView};
+
+    /// A training run's curves in a rerun viewer.
+    pub struct Curves(TrainingView);
+
+    impl Curves {
+        /// A new viewer (`url` None) or the one at `url`, showing the run `name`.
+        pub fn start(url: Option<&str>, name: &str) -> Result<Self> {
+            let target = url.map_or(Target::Spawn, |u| Target::Connect(u.to_string()));
+            Ok(Curves(TrainingView::start(&target, name)?))
+        }
+        /// One optimizer step.
+        pub fn step(&self, step: u64, loss: f64, lr: f64) -> Result<()> {
+            Ok(self.0.log_step(step, loss, lr)?)
+        }
+        /// One validation figure.
+        pub fn validation(&self, step: u64, name: &str, value: f64) -> Result<()> {
+            Ok(self.0.log_validation(step, name, value)?)
+        }
+        /// Flushes the stream.
+        pub fn finish(self) -> Result<()> {
+            self.0.finish()?;
+            Ok(())
+        }
+    }
+}
+
+/// `scaledp train --view` without rerun: a clear error.
+#[cfg(not(feature = "view"))]
+pub mod curves {
+    use anyhow::Result;
+
+    /// Never made: this build has no viewer.
+    pub struct Curves;
+
+    impl Curves {
+        /// Fails: no `view` feature.
+        pub fn start(_: Option<&str>, _: &str) -> Result<Self> {
+            anyhow::bail!("--view: this scaledp was built without the `view` feature (rerun)")
+        }
+        /// Unreachable without a viewer.
+        pub fn step(&self, _: u64, _: f64, _: f64) -> Result<()> {
+            Ok(())
+        }
+        /// Unreachable without a viewer.
+        pub fn validation(&self, _: u64, _: &str, _: f64) -> Result<()> {
+            Ok(())
+        }
+        /// Unreachable without a viewer.
+        pub fn finish(self) -> Result<()> {
+            Ok(())
+        }
     }
 }

@@ -1,0 +1,180 @@
+//! `scaledp bench train`: ScaleDP-Ti training throughput on this machine's cores — on a dataset
+//! converted from simulated recordings (2 cameras, images as the converter writes them unless
+//! `--image-size`, cropped to 0.9), To 2, C 16, batch 64 — with the share of step time spent
+//! waiting for the loader; the same model in PyTorch from the same initial weights on the same
+//! threads (when the benchmark venv has torch); and DDIM-10 latency per action chunk for Ti and S.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use candle_core::Device;
+use scaledp_converter::{InputResult, JobOptions};
+use scaledp_policy::bench::{ddim_latency, train_throughput, write_torch_case};
+use scaledp_policy::{ModelConfig, ModelSize, TrainOptions, Trainer};
+use scaledp_schema::Rig;
+use scaledp_testkit::BENCH_VENV;
+
+use crate::args::BenchTrainArgs;
+use crate::python::{NotRun, Python, Script};
+use crate::synth::synthesize;
+use crate::Outcome;
+
+/// The PyTorch side: times the reference module's training step.
+const TORCH_TRAIN: Script = Script {
+    name: "bench_train_torch.py",
+    text: include_str!("../../tests/py/bench_train_torch.py"),
+};
+/// The reference module `bench_train_torch.py` imports from beside itself.
+const TORCH_MODULE: Script = Script {
+    name: "scaledp_torch.py",
+    text: include_str!("../../tests/py/scaledp_torch.py"),
+};
+
+/// Runs `scaledp bench train`.
+pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
+    if args.steps == 0 || args.latency_runs == 0 {
+        bail!("--steps and --latency-runs must be at least 1");
+    }
+    let tmp = tempfile::tempdir().context("creating a temporary directory")?;
+    let work = args.out.clone().unwrap_or_else(|| tmp.path().to_path_buf());
+    let dataset = make_dataset(&work, &args)?;
+    let ds = dataset.to_string_lossy().to_string();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+
+    let mut opts = TrainOptions::default()
+        .model(ModelSize::Ti)
+        .batch_size(args.batch_size)
+        .val_ratio(0.0)
+        .seed(0);
+    if let Some(s) = &args.image_size {
+        let (w, h) = parse_size(s)?;
+        opts = opts.image_size(w, h);
+    }
+    if let Some(m) = args.micro_batch {
+        opts = opts.micro_batch(m);
+    }
+    let cfg = Trainer::plan(&ds, &opts)?.model;
+    let (cw, ch) = cfg.crop_size();
+    println!(
+        "ScaleDP-Ti, {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}, batch {}, {threads} threads",
+        cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.state_dim, cfg.action_dim,
+        cfg.obs_horizon, cfg.action_chunk, args.batch_size
+    );
+
+    eprintln!(
+        "training {} + 1 warm-up steps in Rust (candle, CPU)…",
+        args.steps
+    );
+    let t = train_throughput(&ds, opts, 1, args.steps, &Device::Cpu)?;
+    println!(
+        "rust (candle)   {:>7.2} s/step  {:>7.2} samples/s  data wait {:.1} % of step time (goal < 5 %)",
+        t.step_s,
+        t.samples_per_s,
+        100.0 * t.data_wait_share
+    );
+    match torch_route(&args, &cfg, &work, threads) {
+        Ok(v) => println!(
+            "pytorch {}  {:>7.2} s/step  {:>7.2} samples/s  (same weights, synthetic batch, {threads} threads)",
+            v["torch"].as_str().unwrap_or("?"),
+            v["mean_step_s"].as_f64().unwrap_or(f64::NAN),
+            v["samples_per_s"].as_f64().unwrap_or(f64::NAN),
+        ),
+        Err(why) => println!("pytorch         not measured: {why}"),
+    }
+
+    for size in [ModelSize::Ti, ModelSize::S] {
+        let mut c = ModelConfig::new(
+            size,
+            cfg.cameras.clone(),
+            (cfg.image_width, cfg.image_height),
+            cfg.state_dim,
+            cfg.action_dim,
+        );
+        c.obs_horizon = cfg.obs_horizon;
+        c.action_chunk = cfg.action_chunk;
+        let l = ddim_latency(&c, 10, args.latency_runs, &Device::Cpu)?;
+        println!(
+            "DDIM-10 {size:<3} per action chunk (batch 1, {} runs): p50 {:.1} ms, p99 {:.1} ms",
+            l.runs, l.p50_ms, l.p99_ms
+        );
+    }
+    Ok(Outcome::Completed)
+}
+
+/// Simulated recordings of the franka rig, converted into a dataset under `work`.
+fn make_dataset(work: &Path, args: &BenchTrainArgs) -> Result<PathBuf> {
+    let rig =
+        Rig::load_or_builtin(&args.rig).with_context(|| format!("loading rig {}", args.rig))?;
+    let recordings = work.join("recordings");
+    std::fs::create_dir_all(&recordings)
+        .with_context(|| format!("creating {}", recordings.display()))?;
+    let jobs = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let ids: Vec<usize> = (0..args.episodes).collect();
+    eprintln!(
+        "simulating {} episodes of {} s ({})…",
+        args.episodes, args.seconds, rig.name
+    );
+    let paths = synthesize(
+        &recordings,
+        &rig,
+        &ids,
+        args.seconds,
+        "put the red cube on the green square",
+        jobs,
+    )?;
+    let dataset = work.join("dataset");
+    eprintln!("converting…");
+    let results = scaledp_converter::run(
+        &paths,
+        &dataset,
+        &JobOptions::default().overwrite(true),
+        &|_| {},
+    )?;
+    for (path, r) in &results {
+        if let InputResult::Failed(e) = r {
+            bail!("converting {}: {}", path.display(), e.one_line());
+        }
+    }
+    Ok(dataset)
+}
+
+/// The PyTorch route's JSON report, or why there is none.
+fn torch_route(
+    args: &BenchTrainArgs,
+    cfg: &ModelConfig,
+    work: &Path,
+    threads: usize,
+) -> Result<serde_json::Value, NotRun> {
+    if args.no_python {
+        return Err(NotRun::Skipped);
+    }
+    let py = Python::locate(&BENCH_VENV, args.python.as_deref())?;
+    let (config, weights) = write_torch_case(&work.join("torch-case"), cfg, 0)
+        .map_err(|e| NotRun::Failed(e.to_string()))?;
+    py.install(&TORCH_MODULE)?;
+    let mut cmd = py.command(&TORCH_TRAIN)?;
+    cmd.arg(config)
+        .arg(weights)
+        .args(["--batch", &args.batch_size.to_string()])
+        .args(["--steps", &(args.steps + 1).to_string()])
+        .args(["--threads", &threads.to_string()]);
+    eprintln!("training the same model in PyTorch…");
+    let (v, _) = py.run_json(cmd, Duration::from_secs(1800))?;
+    if let Some(e) = v["error"].as_str() {
+        return Err(NotRun::NotSetUp(format!(
+            "{e} in the benchmark venv (bash scripts/setup-bench-python.sh)"
+        )));
+    }
+    Ok(v)
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once('x')
+        .with_context(|| format!("--image-size {s}: WxH, e.g. 84x84"))?;
+    Ok((
+        w.parse().with_context(|| format!("--image-size {s}"))?,
+        h.parse().with_context(|| format!("--image-size {s}"))?,
+    ))
+}
