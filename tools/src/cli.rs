@@ -439,7 +439,8 @@ pub struct ViewArgs {
     /// Actions drawn ahead of each frame as the action chunk.
     #[arg(long, default_value_t = 16)]
     pub chunk: usize,
-    /// A policy checkpoint whose predicted chunks are drawn beside the dataset's.
+    /// A policy checkpoint whose predicted chunks are drawn beside the dataset's (one dataset,
+    /// with --episode).
     #[arg(long, value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
 }

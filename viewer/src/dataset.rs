@@ -18,6 +18,7 @@ use crate::episode::{log_rows, Rows};
 use crate::error::{Error, Result};
 use crate::images::encoded_frame;
 use crate::layout;
+use crate::session::Prediction;
 
 /// Rows per batch read for images.
 const IMAGE_BATCH: usize = 16;
@@ -162,6 +163,7 @@ impl Dataset {
         rig: Option<&Rig>,
         max_width: Option<u32>,
         chunk: usize,
+        prediction: Option<&Prediction>,
     ) -> Result<(usize, BTreeMap<String, u64>, Vec<String>)> {
         let rel = format_path(&self.info.data_path, ep.chunk, ep.file);
         let file = self.files.parquet(&rel)?;
@@ -259,6 +261,10 @@ impl Dataset {
             rec.set_time_sequence(layout::FRAME_INDEX, f);
             rec.set_duration_secs(layout::TIMESTAMP, s);
         };
+        if let Some(p) = prediction {
+            rows.predicted =
+                predicted_rows(p, &frame_index, rows.action_names.len()).map_err(|e| bad(&e))?;
+        }
         let rig = self.rig(rig);
         log_rows(rec, &rows, rig.as_ref(), chunk, &at)?;
         // Images: one camera column at a time, a few rows per batch.
@@ -445,4 +451,29 @@ fn read_episodes(files: &DatasetFiles, rel: &str, out: &mut Vec<EpisodeMeta>) ->
         }
     }
     Ok(())
+}
+
+/// `p`'s chunks on the episode's rows (by `frame_index`); an error when their size does not
+/// fit the dataset's action dimensions.
+fn predicted_rows(
+    p: &Prediction,
+    frame_index: &[i64],
+    dim: usize,
+) -> std::result::Result<Vec<Option<Vec<f32>>>, String> {
+    let n = p.frames.len();
+    if n == 0 || dim == 0 || p.values.len() % (n * dim) != 0 {
+        return Err(format!(
+            "the predicted chunks ({} values for {n} frames) do not fit {dim} action dimensions",
+            p.values.len()
+        ));
+    }
+    let per = p.values.len() / n;
+    let at: BTreeMap<i64, usize> = p.frames.iter().enumerate().map(|(i, &f)| (f, i)).collect();
+    Ok(frame_index
+        .iter()
+        .map(|f| {
+            at.get(f)
+                .map(|&i| p.values[i * per..(i + 1) * per].to_vec())
+        })
+        .collect())
 }

@@ -29,6 +29,8 @@ pub(crate) struct Rows {
     /// Also plot `joints` (and the gripper opening they give) per frame: for datasets, whose
     /// joint positions exist only at the frames (a recording plots every message instead).
     pub plot_joints: bool,
+    /// Per frame, a policy's predicted chunk (C × 7 values per arm) when one is shown.
+    pub predicted: Vec<Option<Vec<f32>>>,
 }
 
 /// One plotted pair: entity, state index, action index.
@@ -205,6 +207,20 @@ pub(crate) fn log_rows(
                     &LineStrips3D::new([strip])
                         .with_radii([0.004])
                         .with_colors([0xff8c00ffu32]),
+                )
+                .map_err(r)?;
+            }
+            if let (Some(Some(p)), true) = (
+                rows.predicted.get(t),
+                rows.action_names.len() == 7 * rig.arms.len(),
+            ) {
+                let dim = rows.action_names.len();
+                let steps: Vec<Vec<f32>> = p.chunks(dim).map(<[f32]>::to_vec).collect();
+                rec.log(
+                    layout::predicted_chunk(&rig.arms[i].name),
+                    &LineStrips3D::new([xyz_strip(&steps, 7 * i)])
+                        .with_radii([0.004])
+                        .with_colors([0x1e90ffffu32]),
                 )
                 .map_err(r)?;
             }

@@ -62,5 +62,5 @@ pub use error::{Error, Result};
 pub use input::{classify, InputKind};
 pub use live::{LiveOptions, RecordView, TopicFigures};
 pub use runs::{RolloutView, TrainingView};
-pub use session::{view, Shown, Summary, ViewOptions, Viewer};
+pub use session::{view, Prediction, Shown, Summary, ViewOptions, Viewer};
 pub use sink::{Target, APPLICATION_ID};

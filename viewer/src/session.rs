@@ -24,6 +24,7 @@ pub struct ViewOptions {
     episodes: Vec<u64>,
     rig: Option<Rig>,
     chunk: usize,
+    predictions: BTreeMap<u64, Prediction>,
 }
 
 impl Default for ViewOptions {
@@ -33,8 +34,19 @@ impl Default for ViewOptions {
             episodes: Vec::new(),
             rig: None,
             chunk: 16,
+            predictions: BTreeMap::new(),
         }
     }
+}
+
+/// A policy's predicted action chunks over one dataset episode (what `scaledp_policy`'s
+/// `predict_episode` gives), drawn beside the recorded chunk.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Prediction {
+    /// The frame (`frame_index`) each chunk was predicted at.
+    pub frames: Vec<i64>,
+    /// `[frames, C, A]` in the dataset's raw units, A = the dataset's action dimensions.
+    pub values: Vec<f32>,
 }
 
 /// What one episode showed.
@@ -83,6 +95,13 @@ impl ViewOptions {
         self.rig = rig;
         self
     }
+    /// A policy's predicted chunks for dataset episode `episode` (its `episode_index`), drawn
+    /// per arm beside the recorded chunk.
+    pub fn prediction(mut self, episode: u64, prediction: Prediction) -> Self {
+        self.predictions.insert(episode, prediction);
+        self
+    }
+
     /// Actions drawn ahead of each frame (the policy's action chunk).
     pub fn chunk(mut self, frames: usize) -> Self {
         self.chunk = frames;
@@ -236,6 +255,7 @@ impl Viewer {
             self.opts.rig.as_ref(),
             self.opts.max_width,
             self.opts.chunk,
+            self.opts.predictions.get(&episode),
         )?;
         Ok(Shown {
             name,

@@ -174,6 +174,7 @@ fn rows(ep: &Episode) -> Rows {
         action_names: ep.state_names.clone(),
         joint_names: ep.joint_names.clone(),
         plot_joints: false,
+        predicted: Vec::new(),
     }
 }
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use scaledp_converter::{convert, ConvertOptions, InMemory};
 use scaledp_schema::msg::JointState;
 use scaledp_schema::{Rig, RosMessage};
-use scaledp_viewer::{view, Error, Target, ViewOptions};
+use scaledp_viewer::{view, Error, Prediction, Target, ViewOptions};
 use serde_json::Value;
 
 /// Start of the first synthetic episode (ns).
@@ -455,16 +455,57 @@ fn a_dataset_shows_every_stored_frame_once_and_its_state_and_action() {
         );
     }
     // One episode, downsampled.
+    // One episode, downsampled, with a policy's chunks (4 steps of 7) at every other frame.
     let one = dir.path().join("one.rrd");
+    let frames: Vec<i64> = (0..stored.iter().filter(|r| r["episode_index"] == 1).count() as i64)
+        .step_by(2)
+        .collect();
+    let prediction = Prediction {
+        frames: frames.clone(),
+        values: (0..frames.len() * 4 * 7).map(|i| i as f32 * 1e-3).collect(),
+    };
     let s = save(
         &[&ds],
-        ViewOptions::new().episodes(vec![1]).max_width(Some(32)),
+        ViewOptions::new()
+            .episodes(vec![1])
+            .max_width(Some(32))
+            .prediction(1, prediction.clone()),
         &one,
     );
     assert_eq!(s.shown.len(), 1);
     let recs = read(&one);
     assert_eq!(recs.len(), 1);
     assert!(recs[0]["recording_id"].as_str().unwrap().ends_with("#1"));
+    let mut predicted = rows(&recs[0], "/world/arm/predicted_chunk");
+    predicted.sort_by_key(|row| row["frame_index"].as_i64());
+    let at: Vec<i64> = predicted
+        .iter()
+        .map(|row| row["frame_index"].as_i64().unwrap())
+        .collect();
+    assert_eq!(
+        at, frames,
+        "a predicted chunk at each predicted frame, once"
+    );
+    for row in &predicted {
+        assert_eq!(
+            row["LineStrips3D:strips"],
+            serde_json::json!([4]),
+            "C points"
+        );
+    }
+    // Chunks that do not fit the dataset's 7 action dimensions: an error naming the dataset.
+    let bad = Prediction {
+        frames: vec![0, 1],
+        values: vec![0.0; 2 * 4 * 5],
+    };
+    let err = scaledp_viewer::view(
+        &[ds.to_string_lossy().to_string()],
+        ViewOptions::new().episodes(vec![1]).prediction(1, bad),
+        &Target::Save(dir.path().join("bad.rrd")),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("do not fit 7 action dimensions"), "{err}");
 }
 
 #[test]
