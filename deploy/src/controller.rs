@@ -97,6 +97,7 @@ pub struct Controller {
     last_command: Vec<Option<DMat4>>,
     measured: Vec<DMat4>,
     halted: Option<String>,
+    obs_lag_ns: u64,
 }
 
 impl Controller {
@@ -133,7 +134,16 @@ impl Controller {
             .collect::<Result<Vec<_>>>()?;
         // Frames are big (a raw HD720 bgra8 frame is 3.7 MB): keep those a tick can still pick,
         // the observation lag plus a few frame periods.
-        let keep_frames_s = opts.obs_lag_s + 0.15;
+        // Joints are interpolated between the samples around the tick: the tick must trail the
+        // clock by more than the slowest joint stream's period.
+        let slowest_s = rig
+            .arms
+            .iter()
+            .flat_map(|a| std::iter::once(a.rate_hz).chain(a.gripper.as_ref().map(|g| g.rate_hz)))
+            .map(|hz| 1.0 / hz)
+            .fold(0.0, f64::max);
+        let obs_lag_s = opts.obs_lag_s.max(1.5 * slowest_s);
+        let keep_frames_s = obs_lag_s + 0.15;
         let frames = cams
             .iter()
             .map(|&i| {
@@ -199,6 +209,7 @@ impl Controller {
             last_command: vec![None; n],
             measured: vec![DMat4::IDENTITY; n],
             halted: None,
+            obs_lag_ns: (obs_lag_s * 1e9).round() as u64,
             opts,
         })
     }
@@ -221,6 +232,12 @@ impl Controller {
     /// Rig camera index of each checkpoint camera, in the checkpoint's order.
     pub fn cameras(&self) -> &[usize] {
         &self.cams
+    }
+
+    /// How far the observation instant trails a tick's clock (ns): `obs_lag_s`, or 1.5 periods
+    /// of the slowest joint or gripper stream when that is longer.
+    pub fn obs_lag_ns(&self) -> u64 {
+        self.obs_lag_ns
     }
 
     /// When the newest camera frame was received (receive clock), if any.
@@ -334,12 +351,12 @@ impl Controller {
     }
 
     /// The next control tick, at `now_ns` on the receive clock; the observation instant is
-    /// `obs_lag_s` earlier. Ticks are counted: call once per control period.
+    /// [`Controller::obs_lag_ns`] earlier. Ticks are counted: call once per control period.
     pub fn tick(&mut self, now_ns: u64) -> Tick {
         let index = self.index;
         self.index += 1;
         self.origin_ns.get_or_insert(now_ns);
-        let obs_ns = now_ns.saturating_sub((self.opts.obs_lag_s * 1e9) as u64);
+        let obs_ns = now_ns.saturating_sub(self.obs_lag_ns);
         let mut tick = Tick {
             index,
             obs_ns,

@@ -21,7 +21,8 @@ pub struct ControlOptions {
     /// The converter's frame freshness rule (`--stale-periods`, 1.5).
     pub frame_stale_periods: f64,
     /// The observation tick runs this far behind the receive clock (s), so that joints have a
-    /// sample after it and the tick's camera frames (tens of ms in flight) have arrived.
+    /// sample after it and the tick's camera frames (tens of ms in flight) have arrived; never
+    /// less than 1.5 periods of the slowest joint or gripper stream.
     pub obs_lag_s: f64,
     /// JPEG quality of the dataset's frames (the converter's default, 90).
     pub jpeg_quality: u8,
