@@ -25,6 +25,7 @@ pub mod safety;
 pub mod serve;
 pub mod stats;
 mod streams;
+mod tick;
 
 pub use controller::{Command, ControlOptions, Controller, Request, Tick};
 pub use error::{Error, Result};
