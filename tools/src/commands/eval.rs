@@ -48,6 +48,11 @@ pub struct EvalArgs {
     /// The JSON report (default: eval-<rig>-seed<S>-n<N>.json in the checkpoint directory).
     #[arg(long, value_name = "FILE")]
     pub report: Option<PathBuf>,
+    /// Show every rollout in a rerun viewer once the episodes are done (cameras, the arms in
+    /// 3-D, state beside the commanded action, the scorer's label): a new viewer, or the one at
+    /// URL. The rollouts go through MCAP files (--recordings, else a temporary directory).
+    #[arg(long, value_name = "URL", num_args = 0..=1, conflicts_with = "live")]
+    pub view: Option<Option<String>>,
     #[command(flatten)]
     pub control: ControlArgs,
 }
@@ -74,6 +79,15 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         control: a.control.options(&rig)?,
         recordings: a.recordings.clone(),
     };
+    // With --view and no --recordings, the rollouts go to a temporary directory for the viewer.
+    let scratch = match (&a.view, &a.recordings) {
+        (Some(_), None) => Some(tempfile::tempdir()?),
+        _ => None,
+    };
+    let mut opts = opts;
+    if let Some(dir) = &scratch {
+        opts.recordings = Some(dir.path().to_path_buf());
+    }
     let bar = ProgressBar::new(a.episodes).with_style(
         ProgressStyle::with_template(
             "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes, eta {eta} {msg}",
@@ -152,5 +166,16 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         report.wall_s,
         path.display()
     );
+    if let (Some(url), Some(dir)) = (&a.view, &opts.recordings) {
+        let rollouts: Vec<String> = report
+            .episodes
+            .iter()
+            .filter_map(|e| e.recording.clone())
+            .collect();
+        if rollouts.is_empty() {
+            bail!("--view: no rollout was recorded in {}", dir.display());
+        }
+        super::view::show(&rollouts, url.as_deref())?;
+    }
     Ok(ExitStatus::Success)
 }

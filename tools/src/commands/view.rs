@@ -53,6 +53,22 @@ pub fn run(args: ViewArgs) -> Result<ExitStatus> {
     Ok(ExitStatus::Success)
 }
 
+/// Shows `paths` (recordings, bags or datasets) in a new rerun viewer, or the one at `url`.
+#[cfg(feature = "view")]
+pub fn show(paths: &[String], url: Option<&str>) -> Result<()> {
+    use scaledp_viewer::{Target, ViewOptions};
+    let target = url.map_or(Target::Spawn, |u| Target::Connect(u.to_string()));
+    let summary = scaledp_viewer::view(paths, ViewOptions::new(), &target)?;
+    eprintln!("sent {} rollouts to the rerun viewer", summary.shown.len());
+    Ok(())
+}
+
+/// `--view` without rerun: a clear error.
+#[cfg(not(feature = "view"))]
+pub fn show(_: &[String], _: Option<&str>) -> Result<()> {
+    anyhow::bail!("--view: this scaledp was built without the `view` feature (rerun)")
+}
+
 /// The checkpoint's predicted chunks over each `--episode` of the one dataset given.
 #[cfg(feature = "view")]
 fn predictions(
