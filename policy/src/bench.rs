@@ -87,43 +87,6 @@ pub fn write_torch_case(dir: &Path, cfg: &ModelConfig, seed: u64) -> Result<(Pat
     Ok((config, weights))
 }
 
-/// Runs `tests/py/bench_train_torch.py` with `python` and returns its JSON report (which says
-/// `"error": "torch not installed"` when that is so).
-pub fn torch_train_throughput(
-    python: &Path,
-    script: &Path,
-    case: (&Path, &Path),
-    batch_size: usize,
-    steps: usize,
-    threads: usize,
-) -> Result<serde_json::Value> {
-    let out = std::process::Command::new(python)
-        .arg(script)
-        .arg(case.0)
-        .arg(case.1)
-        .args(["--batch", &batch_size.to_string()])
-        .args(["--steps", &steps.to_string()])
-        .args(["--threads", &threads.to_string()])
-        .output()
-        .map_err(|e| Error::io(python, e))?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    let line = text
-        .lines()
-        .rev()
-        .find(|l| l.starts_with('{'))
-        .unwrap_or("");
-    serde_json::from_str(line).map_err(|_| {
-        Error::Config(format!(
-            "{}: no JSON report ({})",
-            script.display(),
-            String::from_utf8_lossy(&out.stderr)
-                .lines()
-                .last()
-                .unwrap_or("")
-        ))
-    })
-}
-
 /// DDIM latency of one action chunk (batch 1: encoders once, the denoiser once per step).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Latency {

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use scaledp_converter::{convert, ConvertOptions, InMemory};
 use scaledp_schema::msg::JointState;
 use scaledp_schema::{Rig, RosMessage};
+use scaledp_testkit::{make_bags, run_python};
 use scaledp_viewer::{view, Error, Prediction, Target, ViewOptions};
 use serde_json::Value;
 
@@ -42,53 +43,6 @@ fn synth(path: &Path, rig: &Rig, seed: u64, seconds: f64) {
 fn save(paths: &[&Path], opts: ViewOptions, out: &Path) -> scaledp_viewer::Summary {
     let paths: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     view(&paths, opts, &Target::Save(out.into())).unwrap()
-}
-
-/// The tests' Python (`.venv`, made by `scripts/setup-python.sh`; `SCALEDP_PYTHON` overrides).
-fn python() -> PathBuf {
-    if let Ok(p) = std::env::var("SCALEDP_PYTHON") {
-        return p.into();
-    }
-    let p = workspace().join(".venv/bin/python");
-    assert!(
-        p.exists(),
-        "{} is missing: run scripts/setup-python.sh",
-        p.display()
-    );
-    p
-}
-
-fn workspace() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// Runs `tests/py/<script> ARGS` and returns its stdout as JSON.
-fn run_python(script: &str, args: &[&Path]) -> Value {
-    let out = std::process::Command::new(python())
-        .arg(workspace().join("tests/py").join(script))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{script}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
-/// Runs `tests/py/<script> DIR` for its files.
-fn run_python_quiet(script: &str, dir: &Path) {
-    let out = std::process::Command::new(python())
-        .arg(workspace().join("tests/py").join(script))
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{script}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 }
 
 fn read(rrd: &Path) -> Vec<Value> {
@@ -551,9 +505,7 @@ fn foreign_bags_show_their_cameras_and_joints() {
     }
 
     // A ROS 1 bag (lz4 chunks) of the Franka rig: counts and the first joint state.
-    run_python_quiet("make_bags.py", dir.path());
-    let bags: Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("expected.json")).unwrap()).unwrap();
+    let bags = make_bags(dir.path());
     let ros1 = dir.path().join("franka_ros1_lz4.bag");
     let rrd = dir.path().join("ros1.rrd");
     save(&[&ros1], ViewOptions::new(), &rrd);
