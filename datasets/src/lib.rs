@@ -26,6 +26,7 @@ pub use batch::Batch;
 pub use error::{Error, Result};
 pub use files::DatasetFiles;
 pub use loader::{DatasetInfo, ImagePool, Loader, LoaderState};
+pub use meta::Feature;
 pub use normalize::{Affine, Norm, Normalizer};
 pub use options::LoaderOptions;
 pub use sampler::{split_episodes, window, Split, Window};

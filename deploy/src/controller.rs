@@ -20,7 +20,7 @@ use std::collections::{BTreeMap, VecDeque};
 use glam::{DMat4, DVec3};
 use scaledp_converter::live::{self, ArmKinematics, EncodeSpec};
 use scaledp_converter::Serialization;
-use scaledp_policy::{ActionChunk, CheckpointConfig, Observation};
+use scaledp_policy::{ActionChunk, CheckpointConfig, ImageChain, Observation};
 use scaledp_schema::kinematics::rotation_from_rpy;
 use scaledp_schema::msg::JointState;
 use scaledp_schema::rig::Gripper;
@@ -39,6 +39,7 @@ type Frames = VecDeque<(String, Vec<u8>)>;
 #[derive(Debug)]
 pub struct Controller {
     cfg: CheckpointConfig,
+    chain: ImageChain,
     rig: Rig,
     opts: ControlOptions,
     limits: Limits,
@@ -75,6 +76,14 @@ impl Controller {
         opts: ControlOptions,
     ) -> Result<Self> {
         let cams = crate::check::check(cfg, ckpt, rig)?;
+        let chain = cfg.image_chain();
+        if !chain.exact() {
+            tracing::warn!(
+                "{ckpt}: trained on images scaledp convert did not write ({}); camera frames are \
+                 brought to them the converter's way, which may differ from how they were made",
+                chain.describe()
+            );
+        }
         if opts.action_steps == 0 || opts.action_steps > cfg.model.action_chunk {
             return Err(Error::Options(format!(
                 "--action-steps {}: between 1 and the checkpoint's chunk of {}",
@@ -154,6 +163,7 @@ impl Controller {
                 max_step_m: opts.max_step_m,
                 max_step_rad: opts.max_step_rad,
             },
+            chain,
             cfg: cfg.clone(),
             rig: rig.clone(),
             cams,
@@ -364,12 +374,16 @@ impl Controller {
                 return Err(why);
             }
         }
+        // The checkpoint's image chain: the camera frame as the converter stored it (its
+        // size, Lanczos3, JPEG quality), decoded and resized to the model's input as the
+        // loader did in training.
         let m = &self.cfg.model;
         let (w, h) = (m.image_width, m.image_height);
+        let (sw, sh) = self.chain.stored_size();
         let spec = EncodeSpec {
-            width: w,
-            height: h,
-            quality: opts.jpeg_quality,
+            width: sw,
+            height: sh,
+            quality: self.chain.jpeg_quality(),
         };
         let per = 3 * w as usize * h as usize;
         let mut images = vec![0u8; per * self.frames.len()];

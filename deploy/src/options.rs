@@ -24,8 +24,6 @@ pub struct ControlOptions {
     /// sample after it and the tick's camera frames (tens of ms in flight) have arrived; never
     /// less than 1.5 periods of the slowest joint or gripper stream.
     pub obs_lag_s: f64,
-    /// JPEG quality of the dataset's frames (the converter's default, 90).
-    pub jpeg_quality: u8,
 }
 
 impl Default for ControlOptions {
@@ -39,7 +37,6 @@ impl Default for ControlOptions {
             min_silence_s: 0.05,
             frame_stale_periods: 1.5,
             obs_lag_s: 0.05,
-            jpeg_quality: 90,
         }
     }
 }

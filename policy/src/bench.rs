@@ -15,7 +15,9 @@ use crate::inference::ddim_sample;
 use crate::model::{Crop, ScaleDp};
 use crate::scheduler::NoiseScheduler;
 use crate::trainer::optim::{ema_update, AdamW};
-use crate::trainer::{loss_and_grads, Phases, TrainOptions, Trainer};
+use crate::trainer::{
+    candle_loss_and_grads, loss_and_grads, LossSpec, Phases, TrainOptions, Trainer,
+};
 
 /// Training throughput of one configuration.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -114,11 +116,16 @@ pub fn ddim_latency(
     let state = vec![0.1f32; cfg.obs_horizon * cfg.state_dim];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     let mut times = Vec::with_capacity(runs);
+    let mut engine = crate::engine::Engine::default();
     for i in 0..runs + 2 {
         let t0 = Instant::now();
-        let cond = model.encode(&images, &state, 1, Crop::Center, &mut rng)?;
-        let x = ddim_sample(&model, &sched, &cond, &mut rng)?;
-        x.flatten_all()?.to_vec1::<f32>()?;
+        if device.is_cpu() {
+            engine.sample(&model, &sched, &images, &state, 1, &mut rng)?;
+        } else {
+            let cond = model.encode(&images, &state, 1, Crop::Center, &mut rng)?;
+            let x = ddim_sample(&model, &sched, &cond, &mut rng)?;
+            x.flatten_all()?.to_vec1::<f32>()?;
+        }
         if i >= 2 {
             times.push(t0.elapsed().as_secs_f64() * 1e3);
         }
@@ -163,15 +170,19 @@ pub struct StepProfile {
 
 /// Trains a fresh model of `cfg` (seed `seed`) on one synthetic batch of `batch_size` samples
 /// (random images, state and actions, no padding) for `warmup` + `steps` steps, with the
-/// trainer's loss, backward pass, AdamW and EMA, and reports where the timed steps' time went.
-/// No loader: this isolates the model's cost from data loading.
+/// trainer's loss (`spec`), backward pass, AdamW and EMA, and reports where the timed steps'
+/// time went. No loader: this isolates the model's cost from data loading. `autograd` takes
+/// candle's autograd on the candle modules instead of the CPU engine (for comparison).
+#[allow(clippy::too_many_arguments)]
 pub fn synthetic_step_profile(
     cfg: &ModelConfig,
     batch_size: usize,
     micro_batch: Option<usize>,
+    spec: LossSpec,
     warmup: usize,
     steps: usize,
     seed: u64,
+    autograd: bool,
 ) -> Result<StepProfile> {
     let dev = Device::Cpu;
     let (model, params) = ScaleDp::fresh(cfg, seed, &dev)?;
@@ -180,6 +191,7 @@ pub fn synthetic_step_profile(
     let sched = NoiseScheduler::new(100)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let batch = synthetic_batch(cfg, batch_size, &mut rng);
+    let mut engine = crate::engine::Engine::default();
     let (mut phases, mut opt_s, mut wall) = (Phases::default(), 0f64, 0f64);
     let mut cpu0 = None;
     for i in 0..warmup + steps {
@@ -188,15 +200,30 @@ pub fn synthetic_step_profile(
         }
         let t0 = Instant::now();
         let mut p = Phases::default();
-        let (_, grads) = loss_and_grads(
-            &model,
-            &sched,
-            optim.params(),
-            &batch,
-            micro_batch,
-            &mut rng,
-            &mut p,
-        )?;
+        let (_, grads) = if autograd {
+            candle_loss_and_grads(
+                &model,
+                &sched,
+                optim.params(),
+                &batch,
+                spec,
+                micro_batch,
+                &mut rng,
+                &mut p,
+            )?
+        } else {
+            loss_and_grads(
+                &model,
+                &mut engine,
+                &sched,
+                optim.params(),
+                &batch,
+                spec,
+                micro_batch,
+                &mut rng,
+                &mut p,
+            )?
+        };
         let t1 = Instant::now();
         optim.step(&grads, 1e-4, 1.0)?;
         ema_update(&ema, optim.params(), 0.9)?;

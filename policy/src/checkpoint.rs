@@ -128,6 +128,10 @@ pub struct CheckpointConfig {
     pub loader: Option<scaledp_datasets::LoaderState>,
     /// The training settings (free-form, for `--resume` and for the record).
     pub train: serde_json::Value,
+    /// Camera frame → encoder input, as trained (absent in checkpoints written before it was
+    /// recorded: see [`CheckpointConfig::image_chain`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub images: Option<crate::image_chain::ImageChain>,
 }
 
 impl CheckpointConfig {
@@ -169,6 +173,14 @@ impl CheckpointConfig {
             ));
         }
         Ok(cfg)
+    }
+
+    /// The image chain the model was trained on (the recorded one, else the legacy
+    /// assumption: stored at the model's size by the converter at JPEG quality 90).
+    pub fn image_chain(&self) -> crate::image_chain::ImageChain {
+        self.images
+            .clone()
+            .unwrap_or_else(|| crate::image_chain::ImageChain::legacy(&self.model))
     }
 
     /// Writes `dir/config.json`.

@@ -116,6 +116,73 @@ pub struct ModelConfig {
     pub keypoints: usize,
     /// Per-camera feature width after the encoder's Linear (64).
     pub feature_dim: usize,
+    /// What the encoders see of a pixel: [-1, 1] (diffusion_policy's image range normalizer,
+    /// the default) or [0, 1] (checkpoints written before this field existed).
+    #[serde(default = "ImageRange::legacy")]
+    pub image_range: ImageRange,
+    /// Which action tokens each token attends to: all of them (ScaleDP) or only earlier ones
+    /// and itself (the causal ablation, DP-T style).
+    #[serde(default)]
+    pub attention: Attention,
+}
+
+/// How uint8 pixels are scaled before the encoders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageRange {
+    /// `p / 255 · 2 − 1` ∈ [−1, 1]: diffusion_policy's `get_image_range_normalizer`.
+    #[default]
+    Symmetric,
+    /// `p / 255` ∈ [0, 1].
+    Unit,
+}
+
+impl ImageRange {
+    /// What a checkpoint without the field used.
+    fn legacy() -> Self {
+        ImageRange::Unit
+    }
+
+    /// (scale, offset): the encoder input is `p · scale + offset` for a pixel value p.
+    pub fn affine(self) -> (f32, f32) {
+        match self {
+            ImageRange::Symmetric => (2.0 / 255.0, -1.0),
+            ImageRange::Unit => (1.0 / 255.0, 0.0),
+        }
+    }
+}
+
+/// The denoiser's attention pattern over the action chunk.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Attention {
+    /// Every action token attends to every other (ScaleDP).
+    #[default]
+    NonCausal,
+    /// Token i attends to tokens 0 … i only (the ablation the paper compares against).
+    Causal,
+}
+
+impl std::str::FromStr for Attention {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().replace('-', "_").as_str() {
+            "non_causal" | "noncausal" | "full" => Ok(Attention::NonCausal),
+            "causal" => Ok(Attention::Causal),
+            _ => Err(Error::Config(format!(
+                "attention {s:?}: non-causal or causal"
+            ))),
+        }
+    }
+}
+
+impl std::fmt::Display for Attention {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Attention::NonCausal => "non-causal",
+            Attention::Causal => "causal",
+        })
+    }
 }
 
 impl ModelConfig {
@@ -146,6 +213,8 @@ impl ModelConfig {
             resnet_width: 64,
             keypoints: 32,
             feature_dim: 64,
+            image_range: ImageRange::Symmetric,
+            attention: Attention::NonCausal,
         }
     }
 

@@ -8,6 +8,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::checkpoint::{self, CheckpointConfig};
+use crate::engine::Sampler;
 use crate::error::{Error, Result};
 use crate::model::params::randn;
 use crate::model::{Crop, ScaleDp};
@@ -70,6 +71,8 @@ pub struct Policy {
     cfg: CheckpointConfig,
     scheduler: NoiseScheduler,
     dir: PathBuf,
+    /// The CPU engine (sampling on the CPU; candle's modules elsewhere).
+    sampler: Sampler,
 }
 
 impl Policy {
@@ -93,6 +96,7 @@ impl Policy {
             cfg,
             scheduler,
             dir,
+            sampler: Sampler::default(),
         })
     }
 
@@ -185,6 +189,18 @@ impl Policy {
         b: usize,
         rng: &mut ChaCha8Rng,
     ) -> Result<Tensor> {
+        if self.model.device().is_cpu() {
+            let mut engine = self.sampler.lock().map_err(|_| {
+                Error::Config("the policy's sampler was poisoned by a panic".into())
+            })?;
+            let x = engine.sample(&self.model, &self.scheduler, images, state, b, rng)?;
+            let c = &self.cfg.model;
+            return Ok(Tensor::from_vec(
+                x,
+                (b, c.action_chunk, c.action_dim),
+                &Device::Cpu,
+            )?);
+        }
         let cond = self.model.encode(images, state, b, Crop::Center, rng)?;
         ddim_sample(&self.model, &self.scheduler, &cond, rng)
     }

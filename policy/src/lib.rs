@@ -79,7 +79,9 @@
 pub mod bench;
 mod checkpoint;
 mod config;
+mod engine;
 mod error;
+mod image_chain;
 mod inference;
 pub mod model;
 mod predict;
@@ -89,13 +91,14 @@ mod trainer;
 pub use checkpoint::{
     resolve as resolve_checkpoint, CheckpointConfig, Normalization, NormalizerConfig,
 };
-pub use config::{DiffusionConfig, ModelConfig, ModelSize};
+pub use config::{Attention, DiffusionConfig, ImageRange, ModelConfig, ModelSize};
 pub use error::{Error, Mismatch, Result};
+pub use image_chain::{ImageChain, StoredImages, TrainResize, DEFAULT_JPEG_QUALITY};
 pub use inference::{ddim_sample, ActionChunk, Observation, Policy};
 pub use model::cpu::init_threads;
 pub use predict::{predict_episode, EpisodePrediction};
 pub use scheduler::NoiseScheduler;
 pub use trainer::{
-    cosine_lr, AdamWConfig, EmaConfig, Event, Phases, StepRecord, Summary, TrainOptions, Trainer,
-    ValRecord,
+    cosine_lr, AdamWConfig, EmaConfig, Event, LossSpec, Phases, StateNorm, StepRecord, Summary,
+    TrainOptions, Trainer, ValRecord,
 };

@@ -139,6 +139,26 @@ impl NoiseScheduler {
     }
 }
 
+impl NoiseScheduler {
+    /// [`NoiseScheduler::step`] on plain values: `sample` (any number of values) becomes x_prev
+    /// in place, `eps` the predicted noise of the same length.
+    pub fn step_values(&self, eps: &[f32], t: usize, sample: &mut [f32]) -> Result<()> {
+        let n = self.timesteps.len().max(1);
+        let a_t = f64::from(self.gather(&[t])?[0]);
+        let a_prev = match t.checked_sub(self.train_steps() / n) {
+            Some(p) => f64::from(self.gather(&[p])?[0]),
+            None => 1.0,
+        };
+        let (s1, s0) = ((1.0 - a_t).sqrt() as f32, a_t.sqrt() as f32);
+        let (p1, p0) = ((1.0 - a_prev).sqrt() as f32, a_prev.sqrt() as f32);
+        for (x, e) in sample.iter_mut().zip(eps) {
+            let x0 = ((*x - e * s1) / s0).clamp(-1.0, 1.0);
+            *x = x0 * p0 + e * p1;
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -9,7 +9,7 @@ use std::process::Command;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
 use scaledp_policy::model::{Crop, ScaleDp};
-use scaledp_policy::{ModelConfig, ModelSize};
+use scaledp_policy::{Attention, ModelConfig, ModelSize};
 
 fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -17,6 +17,16 @@ fn workspace() -> PathBuf {
 
 #[test]
 fn encoders_and_denoiser_match_the_numpy_reference() {
+    check(Attention::NonCausal);
+}
+
+#[test]
+fn the_causal_ablation_matches_the_numpy_reference() {
+    check(Attention::Causal);
+}
+
+/// Images in [−1, 1] (the default range) with the given attention.
+fn check(attention: Attention) {
     let python = workspace().join(".venv/bin/python");
     assert!(
         python.exists(),
@@ -33,6 +43,7 @@ fn encoders_and_denoiser_match_the_numpy_reference() {
     cfg.resnet_width = 16;
     cfg.action_chunk = 5;
     cfg.crop = 0.9;
+    cfg.attention = attention;
     let dev = Device::Cpu;
     let model = ScaleDp::random(&cfg, 11, 0.1, &dev).unwrap();
     let dir = tempfile::tempdir().unwrap();

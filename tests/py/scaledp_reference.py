@@ -101,7 +101,10 @@ def encode(w, cfg, images, state):
         short = key[len("observation.images.") :] if key.startswith("observation.images.") else key
         p = "obs_encoder." + short.replace(".", "_")
         x = images[:, :, i].reshape(b * to, 3, cfg["image_height"], cfg["image_width"])
-        x = center_crop(x.astype(np.float64) / 255.0, ch, cw)
+        x = x.astype(np.float64) / 255.0
+        if cfg.get("image_range", "unit") == "symmetric":
+            x = x * 2.0 - 1.0
+        x = center_crop(x, ch, cw)
         f = resnet18(w, f"{p}.backbone", x, cfg["resnet_width"])
         f = spatial_softmax(w, f"{p}.pool.nets", f)
         f = f @ w[f"{p}.linear.weight"].T + w[f"{p}.linear.bias"]
@@ -139,12 +142,14 @@ def timestep_embedding(t, dim=256, max_period=10000.0):
     return np.concatenate([np.cos(args), np.sin(args)], axis=-1)
 
 
-def attention(w, p, x, heads):
+def attention(w, p, x, heads, causal=False):
     b, n, d = x.shape
     hd = d // heads
     qkv = linear(w, f"{p}.qkv", x).reshape(b, n, 3, heads, hd).transpose(2, 0, 3, 1, 4)
     q, k, v = qkv[0], qkv[1], qkv[2]
-    s = (q * hd**-0.5) @ k.transpose(0, 1, 3, 2)  # no mask: every token sees every token
+    s = (q * hd**-0.5) @ k.transpose(0, 1, 3, 2)  # ScaleDP: every token sees every token
+    if causal:  # the ablation: token i sees tokens <= i
+        s = np.where(np.tril(np.ones((n, n), dtype=bool)), s, -np.inf)
     s = np.exp(s - s.max(axis=-1, keepdims=True))
     a = s / s.sum(axis=-1, keepdims=True)
     y = (a @ v).transpose(0, 2, 1, 3).reshape(b, n, d)
@@ -158,7 +163,8 @@ def denoise(w, cfg, x, t, cond):
     for i in range(cfg["depth"]):
         p = f"blocks.{i}"
         m = np.split(linear(w, f"{p}.adaLN_modulation.1", silu(c)), 6, axis=1)
-        h = h + m[2][:, None] * attention(w, f"{p}.attn", modulate(layer_norm(h), m[0], m[1]), cfg["heads"])
+        causal = cfg.get("attention", "non_causal") == "causal"
+        h = h + m[2][:, None] * attention(w, f"{p}.attn", modulate(layer_norm(h), m[0], m[1]), cfg["heads"], causal)
         y = linear(w, f"{p}.mlp.fc2", gelu_tanh(linear(w, f"{p}.mlp.fc1", modulate(layer_norm(h), m[3], m[4]))))
         h = h + m[5][:, None] * y
     shift, scale = np.split(linear(w, "final_layer.adaLN_modulation.1", silu(c)), 2, axis=1)

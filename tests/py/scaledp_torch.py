@@ -112,16 +112,18 @@ class TimestepEmbedder(nn.Module):
 
 
 class Attention(nn.Module):
-    def __init__(self, d, heads):
+    def __init__(self, d, heads, causal=False):
         super().__init__()
         self.heads = heads
+        self.causal = causal
         self.qkv = nn.Linear(d, 3 * d)
         self.proj = nn.Linear(d, d)
 
     def forward(self, x):
         b, n, d = x.shape
         qkv = self.qkv(x).reshape(b, n, 3, self.heads, d // self.heads).permute(2, 0, 3, 1, 4)
-        y = F.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2])  # no mask: non-causal
+        # ScaleDP: no mask (non-causal); the ablation: token i sees tokens <= i.
+        y = F.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2], is_causal=self.causal)
         return self.proj(y.transpose(1, 2).reshape(b, n, d))
 
 
@@ -136,9 +138,9 @@ class Mlp(nn.Module):
 
 
 class Block(nn.Module):
-    def __init__(self, d, heads, mlp_ratio=4):
+    def __init__(self, d, heads, mlp_ratio=4, causal=False):
         super().__init__()
-        self.attn = Attention(d, heads)
+        self.attn = Attention(d, heads, causal)
         self.mlp = Mlp(d, mlp_ratio * d)
         self.adaLN_modulation = nn.Sequential(nn.SiLU(), nn.Linear(d, 6 * d))
 
@@ -175,7 +177,8 @@ class ScaleDPPolicy(nn.Module):
         self.pos_embed = nn.Parameter(torch.zeros(1, c, d))
         self.t_embedder = TimestepEmbedder(d)
         self.cond_obs_emb = nn.Linear(cond, d)
-        self.blocks = nn.ModuleList([Block(d, cfg["heads"], cfg["mlp_ratio"]) for _ in range(cfg["depth"])])
+        causal = cfg.get("attention", "non_causal") == "causal"
+        self.blocks = nn.ModuleList([Block(d, cfg["heads"], cfg["mlp_ratio"], causal) for _ in range(cfg["depth"])])
         self.final_layer = FinalLayer(d, a)
 
     @classmethod
@@ -188,7 +191,8 @@ class ScaleDPPolicy(nn.Module):
         return policy
 
     def crop(self, images, train):
-        """uint8 [N, 3, H, W] -> float [N, 3, h, w] in [0, 1]: random (per image) or centre crop."""
+        """uint8 [N, 3, H, W] -> float [N, 3, h, w] in the model's pixel range ([-1, 1], or [0, 1]
+        for `image_range: unit`): random (per image) or centre crop."""
         cfg = self.cfg
         ch = min(max(round(cfg["image_height"] * cfg["crop"]), 1), cfg["image_height"])
         cw = min(max(round(cfg["image_width"] * cfg["crop"]), 1), cfg["image_width"])
@@ -200,6 +204,8 @@ class ScaleDPPolicy(nn.Module):
         else:
             t, l = int(round((h - ch) / 2.0)), int(round((w - cw) / 2.0))
             images = images[..., t : t + ch, l : l + cw]
+        if self.cfg.get("image_range", "unit") == "symmetric":
+            return images.float() / 255.0 * 2.0 - 1.0
         return images.float() / 255.0
 
     def encode(self, images, state, train=False):

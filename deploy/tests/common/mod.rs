@@ -126,6 +126,7 @@ pub fn write(root: &Path, spec: &Spec) -> PathBuf {
         seed: 0,
         loader: None,
         train: serde_json::Value::Null,
+        images: None,
     };
     std::fs::write(
         dir.join("config.json"),

@@ -39,21 +39,26 @@ pub fn conv2d_nhwc(
 
 /// The geometry of one convolution.
 #[derive(Clone, Copy, Debug)]
-struct Geom {
-    b: usize,
-    c_in: usize,
-    h: usize,
-    w: usize,
-    c_out: usize,
-    kh: usize,
-    kw: usize,
-    stride: usize,
-    padding: usize,
+pub(crate) struct Geom {
+    pub(crate) b: usize,
+    pub(crate) c_in: usize,
+    pub(crate) h: usize,
+    pub(crate) w: usize,
+    pub(crate) c_out: usize,
+    pub(crate) kh: usize,
+    pub(crate) kw: usize,
+    pub(crate) stride: usize,
+    pub(crate) padding: usize,
 }
 
 impl Geom {
     /// From the NHWC input's and the OIHW kernel's dims.
-    fn new(x: &[usize], k: &[usize], stride: usize, padding: usize) -> candle_core::Result<Self> {
+    pub(crate) fn new(
+        x: &[usize],
+        k: &[usize],
+        stride: usize,
+        padding: usize,
+    ) -> candle_core::Result<Self> {
         let (&[b, h, w, c_in], &[c_out, kc, kh, kw]) = (x, k) else {
             candle_core::bail!("conv2d: input {x:?} and kernel {k:?} must both be 4-D");
         };
@@ -75,20 +80,20 @@ impl Geom {
             padding,
         })
     }
-    fn out_h(&self) -> usize {
+    pub(crate) fn out_h(&self) -> usize {
         (self.h + 2 * self.padding - self.kh) / self.stride + 1
     }
-    fn out_w(&self) -> usize {
+    pub(crate) fn out_w(&self) -> usize {
         (self.w + 2 * self.padding - self.kw) / self.stride + 1
     }
-    fn pixels(&self) -> usize {
+    pub(crate) fn pixels(&self) -> usize {
         self.out_h() * self.out_w()
     }
-    fn k(&self) -> usize {
+    pub(crate) fn k(&self) -> usize {
         self.c_in * self.kh * self.kw
     }
     /// Values of one input sample.
-    fn per_in(&self) -> usize {
+    pub(crate) fn per_in(&self) -> usize {
         self.h * self.w * self.c_in
     }
     /// Samples per chunk so that a chunk's patch matrix stays under the limit.
@@ -109,7 +114,7 @@ impl Geom {
 }
 
 /// `[C_out, C_in, kh, kw]` → `[C_out, kh, kw, C_in]`.
-fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
+pub(crate) fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
     let (ci, kk) = (g.c_in, g.kh * g.kw);
     let mut out = vec![0f32; w.len()];
     for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
@@ -124,7 +129,7 @@ fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
 }
 
 /// `[C_out, kh, kw, C_in]` → `[C_out, C_in, kh, kw]`.
-fn ohwi_to_oihw(g: &Geom, w: &[f32]) -> Vec<f32> {
+pub(crate) fn ohwi_to_oihw(g: &Geom, w: &[f32]) -> Vec<f32> {
     let (ci, kk) = (g.c_in, g.kh * g.kw);
     let mut out = vec![0f32; w.len()];
     for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
@@ -191,6 +196,64 @@ fn col2im(g: &Geom, cols: &[f32], dx: &mut [f32]) {
         });
 }
 
+/// `out` `[B, H', W', C_out]` = the convolution of `x` (NHWC) with `wp` (`[C_out, kh, kw,
+/// C_in]`, see [`oihw_to_ohwi`]).
+pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], out: &mut [f32]) {
+    let (p, k, co) = (g.pixels(), g.k(), g.c_out);
+    if g.pointwise() {
+        gemm(g.b * p, co, k, x, false, wp, true, out, false);
+        return;
+    }
+    let step = g.chunk();
+    with_scratch(step * p * k, |cols| {
+        for s0 in (0..g.b).step_by(step) {
+            let n = step.min(g.b - s0);
+            im2col(g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
+            let dst = &mut out[s0 * p * co..(s0 + n) * p * co];
+            gemm(n * p, co, k, cols, false, wp, true, dst, false);
+        }
+    });
+}
+
+/// `dx` (NHWC, `B · per_in` values) from `dy` and `wp`; `accumulate` adds to `dx`.
+pub(crate) fn grad_input(g: &Geom, dy: &[f32], wp: &[f32], dx: &mut [f32], accumulate: bool) {
+    let (p, k, co) = (g.pixels(), g.k(), g.c_out);
+    if g.pointwise() {
+        gemm(g.b * p, k, co, dy, false, wp, false, dx, accumulate);
+        return;
+    }
+    if !accumulate {
+        dx[..g.b * g.per_in()].fill(0.0);
+    }
+    let step = g.chunk();
+    with_scratch(step * p * k, |cols| {
+        for s0 in (0..g.b).step_by(step) {
+            let n = step.min(g.b - s0);
+            let dys = &dy[s0 * p * co..(s0 + n) * p * co];
+            gemm(n * p, k, co, dys, false, wp, false, cols, false);
+            col2im(g, cols, &mut dx[s0 * g.per_in()..(s0 + n) * g.per_in()]);
+        }
+    });
+}
+
+/// `dwp` (`[C_out, kh, kw, C_in]`, overwritten) from `x` and `dy`.
+pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
+    let (p, k, co) = (g.pixels(), g.k(), g.c_out);
+    if g.pointwise() {
+        gemm(co, k, g.b * p, dy, true, x, false, dwp, false);
+        return;
+    }
+    let step = g.chunk();
+    with_scratch(step * p * k, |cols| {
+        for s0 in (0..g.b).step_by(step) {
+            let n = step.min(g.b - s0);
+            im2col(g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
+            let dys = &dy[s0 * p * co..(s0 + n) * p * co];
+            gemm(co, k, n * p, dys, true, cols, false, dwp, s0 > 0);
+        }
+    });
+}
+
 /// `y = conv(x, w)`; its backward is [`GradInput`] and [`GradWeight`].
 struct Conv {
     stride: usize,
@@ -212,22 +275,9 @@ impl CustomOp2 for Conv {
         let g = Geom::new(l1.dims(), l2.dims(), self.stride, self.padding)?;
         let (x, w) = (values(s1, l1)?, values(s2, l2)?);
         let wp = oihw_to_ohwi(&g, w);
-        let (p, k, co) = (g.pixels(), g.k(), g.c_out);
-        let mut out = vec![0f32; g.b * p * co];
-        if g.pointwise() {
-            gemm(g.b * p, co, k, x, false, &wp, true, &mut out, false);
-        } else {
-            let step = g.chunk();
-            with_scratch(step * p * k, |cols| {
-                for s0 in (0..g.b).step_by(step) {
-                    let n = step.min(g.b - s0);
-                    im2col(&g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
-                    let dst = &mut out[s0 * p * co..(s0 + n) * p * co];
-                    gemm(n * p, co, k, cols, false, &wp, true, dst, false);
-                }
-            });
-        }
-        let shape = Shape::from((g.b, g.out_h(), g.out_w(), co));
+        let mut out = vec![0f32; g.b * g.pixels() * g.c_out];
+        forward(&g, x, &wp, &mut out);
+        let shape = Shape::from((g.b, g.out_h(), g.out_w(), g.c_out));
         Ok((CpuStorage::F32(out), shape))
     }
 
@@ -286,21 +336,8 @@ impl CustomOp2 for GradInput {
         let g = Geom::new(&self.x_dims, l2.dims(), self.stride, self.padding)?;
         let (dy, w) = (values(s1, l1)?, values(s2, l2)?);
         let wp = oihw_to_ohwi(&g, w);
-        let (p, k, co) = (g.pixels(), g.k(), g.c_out);
         let mut dx = vec![0f32; g.b * g.per_in()];
-        if g.pointwise() {
-            gemm(g.b * p, k, co, dy, false, &wp, false, &mut dx, false);
-        } else {
-            let step = g.chunk();
-            with_scratch(step * p * k, |cols| {
-                for s0 in (0..g.b).step_by(step) {
-                    let n = step.min(g.b - s0);
-                    let dys = &dy[s0 * p * co..(s0 + n) * p * co];
-                    gemm(n * p, k, co, dys, false, &wp, false, cols, false);
-                    col2im(&g, cols, &mut dx[s0 * g.per_in()..(s0 + n) * g.per_in()]);
-                }
-            });
-        }
+        grad_input(&g, dy, &wp, &mut dx, false);
         Ok((CpuStorage::F32(dx), Shape::from(self.x_dims.clone())))
     }
 }
@@ -326,21 +363,8 @@ impl CustomOp2 for GradWeight {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let g = Geom::new(l1.dims(), &self.w_dims, self.stride, self.padding)?;
         let (x, dy) = (values(s1, l1)?, values(s2, l2)?);
-        let (p, k, co) = (g.pixels(), g.k(), g.c_out);
-        let mut dwp = vec![0f32; co * k];
-        if g.pointwise() {
-            gemm(co, k, g.b * p, dy, true, x, false, &mut dwp, false);
-        } else {
-            let step = g.chunk();
-            with_scratch(step * p * k, |cols| {
-                for s0 in (0..g.b).step_by(step) {
-                    let n = step.min(g.b - s0);
-                    im2col(&g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
-                    let dys = &dy[s0 * p * co..(s0 + n) * p * co];
-                    gemm(co, k, n * p, dys, true, cols, false, &mut dwp, s0 > 0);
-                }
-            });
-        }
+        let mut dwp = vec![0f32; g.c_out * g.k()];
+        grad_weight(&g, x, dy, &mut dwp);
         let dw = ohwi_to_oihw(&g, &dwp);
         Ok((CpuStorage::F32(dw), Shape::from(self.w_dims.clone())))
     }

@@ -1,5 +1,7 @@
 //! The ScaleDP denoiser: a DiT over the action chunk with adaLN-Zero conditioning on
-//! `c = t_emb + cond_emb` and non-causal self-attention (every action token sees every other).
+//! `c = t_emb + cond_emb` and non-causal self-attention (every action token sees every other;
+//! [`crate::Attention::Causal`] masks later tokens for the paper's ablation, nothing else
+//! changes: same weights, same names).
 //!
 //! State-dict names as the reference PyTorch module: `x_embedder.*`, `pos_embed`,
 //! `t_embedder.mlp.{0,2}.*`, `cond_obs_emb.*`, `blocks.{i}.attn.{qkv,proj}.*`,
@@ -75,9 +77,18 @@ pub fn timestep_embedding(t: &[f32], device: &Device) -> Result<Tensor> {
     Ok(Tensor::from_vec(v, (t.len(), FREQ_DIM), device)?)
 }
 
+/// `[t, t]`: 0 where key j ≤ query i, −∞ above the diagonal.
+fn causal_mask(t: usize, device: &Device) -> Result<Tensor> {
+    let m: Vec<f32> = (0..t)
+        .flat_map(|i| (0..t).map(move |j| if j <= i { 0.0 } else { f32::NEG_INFINITY }))
+        .collect();
+    Ok(Tensor::from_vec(m, (t, t), device)?)
+}
+
 #[derive(Clone, Debug)]
 struct Block {
     heads: usize,
+    causal: bool,
     qkv: Linear,
     proj: Linear,
     fc1: Linear,
@@ -86,10 +97,11 @@ struct Block {
 }
 
 impl Block {
-    fn new(vb: &Builder, d: usize, heads: usize, mlp_ratio: usize) -> Result<Self> {
+    fn new(vb: &Builder, d: usize, heads: usize, mlp_ratio: usize, causal: bool) -> Result<Self> {
         let x = Init::XavierUniform;
         Ok(Block {
             heads,
+            causal,
             qkv: Linear::new(&vb.pp("attn").pp("qkv"), d, 3 * d, x)?,
             proj: Linear::new(&vb.pp("attn").pp("proj"), d, d, x)?,
             fc1: Linear::new(&vb.pp("mlp").pp("fc1"), d, mlp_ratio * d, x)?,
@@ -109,8 +121,12 @@ impl Block {
         let q = (qkv.get(0)?.contiguous()? * (hd as f64).powf(-0.5))?;
         let k = qkv.get(1)?.contiguous()?;
         let v = qkv.get(2)?.contiguous()?;
-        // No mask: the attention is non-causal.
-        let scores = q.matmul(&k.t()?)?;
+        // ScaleDP: no mask, every token sees every other. The causal ablation hides later
+        // tokens (−∞ above the diagonal; the diagonal keeps every row's softmax finite).
+        let mut scores = q.matmul(&k.t()?)?;
+        if self.causal {
+            scores = scores.broadcast_add(&causal_mask(t, x.device())?)?;
+        }
         let weights = candle_nn::ops::softmax(&scores, D::Minus1)?;
         let y = weights.matmul(&v)?.transpose(1, 2)?.reshape((b, t, d))?;
         self.proj.forward(&y)
@@ -136,6 +152,8 @@ pub(crate) struct DenoiserDims {
     pub action_dim: usize,
     pub action_chunk: usize,
     pub cond_dim: usize,
+    /// The causal ablation (token i attends to tokens ≤ i only).
+    pub causal: bool,
 }
 
 /// ε-prediction network: noisy actions `[B, C, A]`, timesteps, condition `[B, cond]` → `[B, C, A]`.
@@ -158,7 +176,7 @@ impl Denoiser {
         let t = vb.pp("t_embedder").pp("mlp");
         let f = vb.pp("final_layer");
         let blocks = (0..p.depth)
-            .map(|i| Block::new(&vb.pp("blocks").pp(i), d, p.heads, p.mlp_ratio))
+            .map(|i| Block::new(&vb.pp("blocks").pp(i), d, p.heads, p.mlp_ratio, p.causal))
             .collect::<Result<_>>()?;
         Ok(Denoiser {
             x_embedder: Linear::new(&vb.pp("x_embedder"), p.action_dim, d, Init::XavierUniform)?,

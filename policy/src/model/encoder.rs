@@ -1,5 +1,6 @@
 //! diffusion_policy's image encoder (robomimic's `VisualCore`), one per camera: crop, scale to
-//! [0, 1], ResNet-18-GN trunk, SpatialSoftmax (32 keypoints → 64 values), Linear(64 → 64).
+//! [−1, 1] (diffusion_policy's image range normalizer; [0, 1] for older checkpoints),
+//! ResNet-18-GN trunk, SpatialSoftmax (32 keypoints → 64 values), Linear(64 → 64).
 //! No ImageNet normalisation: diffusion_policy applies none to encoders trained from scratch.
 //!
 //! Weight names under the encoder's prefix (`obs_encoder.<camera>.`): `backbone.*` (the trunk,
@@ -10,6 +11,7 @@ use candle_core::{Device, Tensor};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::config::ImageRange;
 use crate::error::Result;
 use crate::model::params::{Builder, Init};
 use crate::model::resnet::ResNet18;
@@ -142,11 +144,12 @@ fn centre(d: usize) -> usize {
 }
 
 /// Crops `n` uint8 RGB images `[n, 3, h, w]` to `[n, 3, ch, cw]` (`[n, ch, cw, 3]` when
-/// `channels_last`) and scales them to [0, 1]. `pick(i)` selects image i of the source (so one
-/// camera can be taken out of a batch laid out `[B, To, cams, 3, H, W]`).
+/// `channels_last`) and scales them as `range` says. `pick(i)` selects image i of the source
+/// (so one camera can be taken out of a batch laid out `[B, To, cams, 3, H, W]`).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn crop_images(
     src: &[u8],
+    range: ImageRange,
     pick: impl Fn(usize) -> usize,
     n: usize,
     (w, h): (usize, usize),
@@ -156,7 +159,43 @@ pub(crate) fn crop_images(
     rng: &mut ChaCha8Rng,
     device: &Device,
 ) -> Result<Tensor> {
+    let out = crop_values(
+        src,
+        range,
+        pick,
+        n,
+        (w, h),
+        (cw, ch),
+        crop,
+        channels_last,
+        rng,
+    );
+    Ok(if channels_last {
+        Tensor::from_vec(out, (n, ch, cw, 3), device)?
+    } else {
+        Tensor::from_vec(out, (n, 3, ch, cw), device)?
+    })
+}
+
+/// [`crop_images`]' values: the same draws from `rng` (one window per image, in order), the
+/// same arithmetic.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn crop_values(
+    src: &[u8],
+    range: ImageRange,
+    pick: impl Fn(usize) -> usize,
+    n: usize,
+    (w, h): (usize, usize),
+    (cw, ch): (usize, usize),
+    crop: Crop,
+    channels_last: bool,
+    rng: &mut ChaCha8Rng,
+) -> Vec<f32> {
     let plane = w * h;
+    let (scale, offset) = range.affine();
+    let lut: Vec<f32> = (0..=255u8)
+        .map(|p| (f64::from(p) * f64::from(scale) + f64::from(offset)) as f32)
+        .collect();
     let mut out = vec![0f32; n * 3 * ch * cw];
     for i in 0..n {
         let (y0, x0) = match crop {
@@ -171,20 +210,16 @@ pub(crate) fn crop_images(
                 if channels_last {
                     let d = &mut dst[r * cw * 3..(r + 1) * cw * 3];
                     for (k, s) in s.iter().enumerate() {
-                        d[k * 3 + c] = f32::from(*s) / 255.0;
+                        d[k * 3 + c] = lut[usize::from(*s)];
                     }
                 } else {
                     let d = &mut dst[(c * ch + r) * cw..][..cw];
                     for (d, s) in d.iter_mut().zip(s) {
-                        *d = f32::from(*s) / 255.0;
+                        *d = lut[usize::from(*s)];
                     }
                 }
             }
         }
     }
-    Ok(if channels_last {
-        Tensor::from_vec(out, (n, ch, cw, 3), device)?
-    } else {
-        Tensor::from_vec(out, (n, 3, ch, cw), device)?
-    })
+    out
 }

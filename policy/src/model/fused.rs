@@ -57,16 +57,16 @@ pub fn group_norm_nchw(
 }
 
 /// Geometry: N samples, S pixels, C channels (innermost), G groups.
-#[derive(Clone, Copy)]
-struct Dims {
-    n: usize,
-    s: usize,
-    c: usize,
-    g: usize,
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Dims {
+    pub(crate) n: usize,
+    pub(crate) s: usize,
+    pub(crate) c: usize,
+    pub(crate) g: usize,
 }
 
 impl Dims {
-    fn of(dims: &[usize], groups: usize) -> candle_core::Result<Self> {
+    pub(crate) fn of(dims: &[usize], groups: usize) -> candle_core::Result<Self> {
         let c = dims.last().copied().unwrap_or(0);
         if dims.len() < 2 || groups == 0 || c % groups != 0 {
             candle_core::bail!("group norm: shape {dims:?} with {groups} groups");
@@ -114,6 +114,34 @@ fn stats(d: &Dims, x: &[f32], eps: f64) -> (Vec<f32>, Vec<f32>) {
     (mean.iter().map(|&v| v as f32).collect(), rstd)
 }
 
+/// GroupNorm (then ReLU when `relu`) of channels-last `x` into `y`, parallel over samples.
+pub(crate) fn group_norm_forward(
+    d: &Dims,
+    x: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    eps: f64,
+    relu: bool,
+    y: &mut [f32],
+) {
+    let cg = d.c / d.g;
+    y[..x.len()]
+        .par_chunks_mut(d.per())
+        .zip(x.par_chunks(d.per()))
+        .for_each(|(y, x)| {
+            let (mean, rstd) = stats(d, x, eps);
+            // y = x·a + b per channel.
+            let a: Vec<f32> = (0..d.c).map(|c| rstd[c / cg] * gamma[c]).collect();
+            let b: Vec<f32> = (0..d.c).map(|c| beta[c] - mean[c / cg] * a[c]).collect();
+            for (y, x) in y.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
+                for (((y, &x), &a), &b) in y.iter_mut().zip(x).zip(&a).zip(&b) {
+                    let v = x * a + b;
+                    *y = if relu { v.max(0.0) } else { v };
+                }
+            }
+        });
+}
+
 struct GroupNorm {
     groups: usize,
     eps: f64,
@@ -137,21 +165,7 @@ impl CustomOp3 for GroupNorm {
         let d = Dims::of(l1.dims(), self.groups)?;
         let (x, gamma, beta) = (values(s1, l1)?, values(s2, l2)?, values(s3, l3)?);
         let mut y = vec![0f32; x.len()];
-        let cg = d.c / d.g;
-        y.par_chunks_mut(d.per())
-            .zip(x.par_chunks(d.per()))
-            .for_each(|(y, x)| {
-                let (mean, rstd) = stats(&d, x, self.eps);
-                // y = x·a + b per channel.
-                let a: Vec<f32> = (0..d.c).map(|c| rstd[c / cg] * gamma[c]).collect();
-                let b: Vec<f32> = (0..d.c).map(|c| beta[c] - mean[c / cg] * a[c]).collect();
-                for (y, x) in y.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
-                    for (((y, &x), &a), &b) in y.iter_mut().zip(x).zip(&a).zip(&b) {
-                        let v = x * a + b;
-                        *y = if self.relu { v.max(0.0) } else { v };
-                    }
-                }
-            });
+        group_norm_forward(&d, x, gamma, beta, self.eps, self.relu, &mut y);
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
 
@@ -181,6 +195,101 @@ impl CustomOp3 for GroupNorm {
     }
 }
 
+/// The gradients of [`group_norm_forward`] from `x` and `dy`: `dx` (overwritten), and
+/// `dgamma`, `dbeta` (overwritten, or added to when `accumulate`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn group_norm_backward(
+    d: &Dims,
+    x: &[f32],
+    dy: &[f32],
+    gamma: &[f32],
+    beta: &[f32],
+    eps: f64,
+    relu: bool,
+    dx: &mut [f32],
+    dgamma_out: &mut [f32],
+    dbeta_out: &mut [f32],
+    accumulate: bool,
+) {
+    let cg = d.c / d.g;
+    let m = d.m().max(1) as f64;
+    // Per (sample, channel): Σ e·x̂ and Σ e (e: dy through the ReLU), reduced over
+    // samples afterwards.
+    let mut partial = vec![0f64; d.n * d.c * 2];
+    dx.par_chunks_mut(d.per())
+        .zip(x.par_chunks(d.per()))
+        .zip(dy.par_chunks(d.per()))
+        .zip(partial.par_chunks_mut(d.c * 2))
+        .for_each(|(((dx, x), dy), part)| {
+            let (mean, rstd) = stats(d, x, eps);
+            let mean_c: Vec<f32> = (0..d.c).map(|c| mean[c / cg]).collect();
+            let rstd_c: Vec<f32> = (0..d.c).map(|c| rstd[c / cg]).collect();
+            let (sg, sb) = part.split_at_mut(d.c);
+            // Pass 1: e into dx, and the per-channel sums.
+            let (mut sgf, mut sbf) = (vec![0f32; d.c], vec![0f32; d.c]);
+            for ((dx, x), dy) in dx
+                .chunks_exact_mut(d.c)
+                .zip(x.chunks_exact(d.c))
+                .zip(dy.chunks_exact(d.c))
+            {
+                for c in 0..d.c {
+                    let xhat = (x[c] - mean_c[c]) * rstd_c[c];
+                    let mut e = dy[c];
+                    if relu && xhat * gamma[c] + beta[c] <= 0.0 {
+                        e = 0.0;
+                    }
+                    dx[c] = e;
+                    sgf[c] += e * xhat;
+                    sbf[c] += e;
+                }
+                // Flush the f32 partial sums into f64 every row keeps their error small.
+                for c in 0..d.c {
+                    sg[c] += f64::from(sgf[c]);
+                    sb[c] += f64::from(sbf[c]);
+                }
+                sgf.fill(0.0);
+                sbf.fill(0.0);
+            }
+            // Group sums of dx̂ = e·γ and dx̂·x̂.
+            let mut mean_d = vec![0f32; d.g];
+            let mut mean_dx = vec![0f32; d.g];
+            for g in 0..d.g {
+                let (mut s_d, mut s_dx) = (0f64, 0f64);
+                for c in g * cg..(g + 1) * cg {
+                    s_d += f64::from(gamma[c]) * sb[c];
+                    s_dx += f64::from(gamma[c]) * sg[c];
+                }
+                mean_d[g] = (s_d / m) as f32;
+                mean_dx[g] = (s_dx / m) as f32;
+            }
+            let md_c: Vec<f32> = (0..d.c).map(|c| mean_d[c / cg]).collect();
+            let mdx_c: Vec<f32> = (0..d.c).map(|c| mean_dx[c / cg]).collect();
+            // Pass 2: dx = 1/σ · (e·γ − mean(dx̂) − x̂ · mean(dx̂·x̂)).
+            for (dx, x) in dx.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
+                for c in 0..d.c {
+                    let xhat = (x[c] - mean_c[c]) * rstd_c[c];
+                    dx[c] = rstd_c[c] * (dx[c] * gamma[c] - md_c[c] - xhat * mdx_c[c]);
+                }
+            }
+        });
+    let (mut dgamma, mut dbeta) = (vec![0f64; d.c], vec![0f64; d.c]);
+    for part in partial.chunks(2 * d.c) {
+        for c in 0..d.c {
+            dgamma[c] += part[c];
+            dbeta[c] += part[d.c + c];
+        }
+    }
+    for c in 0..d.c {
+        if accumulate {
+            dgamma_out[c] += dgamma[c] as f32;
+            dbeta_out[c] += dbeta[c] as f32;
+        } else {
+            dgamma_out[c] = dgamma[c] as f32;
+            dbeta_out[c] = dbeta[c] as f32;
+        }
+    }
+}
+
 /// The gradients of [`GroupNorm`], packed: `[dx (N·S·C), dgamma (C), dbeta (C)]`.
 struct GroupNormGrad {
     groups: usize,
@@ -205,81 +314,12 @@ impl CustomOp3 for GroupNormGrad {
         let d = Dims::of(l1.dims(), self.groups)?;
         let (x, dy, gb) = (values(s1, l1)?, values(s2, l2)?, values(s3, l3)?);
         let (gamma, beta) = gb.split_at(d.c);
-        let cg = d.c / d.g;
-        let m = d.m().max(1) as f64;
         let mut out = vec![0f32; x.len() + 2 * d.c];
-        let (dx, _) = out.split_at_mut(x.len());
-        // Per (sample, channel): Σ e·x̂ and Σ e (e: dy through the ReLU), reduced over
-        // samples afterwards.
-        let mut partial = vec![0f64; d.n * d.c * 2];
-        dx.par_chunks_mut(d.per())
-            .zip(x.par_chunks(d.per()))
-            .zip(dy.par_chunks(d.per()))
-            .zip(partial.par_chunks_mut(d.c * 2))
-            .for_each(|(((dx, x), dy), part)| {
-                let (mean, rstd) = stats(&d, x, self.eps);
-                let mean_c: Vec<f32> = (0..d.c).map(|c| mean[c / cg]).collect();
-                let rstd_c: Vec<f32> = (0..d.c).map(|c| rstd[c / cg]).collect();
-                let (sg, sb) = part.split_at_mut(d.c);
-                // Pass 1: e into dx, and the per-channel sums.
-                let (mut sgf, mut sbf) = (vec![0f32; d.c], vec![0f32; d.c]);
-                for ((dx, x), dy) in dx
-                    .chunks_exact_mut(d.c)
-                    .zip(x.chunks_exact(d.c))
-                    .zip(dy.chunks_exact(d.c))
-                {
-                    for c in 0..d.c {
-                        let xhat = (x[c] - mean_c[c]) * rstd_c[c];
-                        let mut e = dy[c];
-                        if self.relu && xhat * gamma[c] + beta[c] <= 0.0 {
-                            e = 0.0;
-                        }
-                        dx[c] = e;
-                        sgf[c] += e * xhat;
-                        sbf[c] += e;
-                    }
-                    // Flush the f32 partial sums into f64 every row keeps their error small.
-                    for c in 0..d.c {
-                        sg[c] += f64::from(sgf[c]);
-                        sb[c] += f64::from(sbf[c]);
-                    }
-                    sgf.fill(0.0);
-                    sbf.fill(0.0);
-                }
-                // Group sums of dx̂ = e·γ and dx̂·x̂.
-                let mut mean_d = vec![0f32; d.g];
-                let mut mean_dx = vec![0f32; d.g];
-                for g in 0..d.g {
-                    let (mut s_d, mut s_dx) = (0f64, 0f64);
-                    for c in g * cg..(g + 1) * cg {
-                        s_d += f64::from(gamma[c]) * sb[c];
-                        s_dx += f64::from(gamma[c]) * sg[c];
-                    }
-                    mean_d[g] = (s_d / m) as f32;
-                    mean_dx[g] = (s_dx / m) as f32;
-                }
-                let md_c: Vec<f32> = (0..d.c).map(|c| mean_d[c / cg]).collect();
-                let mdx_c: Vec<f32> = (0..d.c).map(|c| mean_dx[c / cg]).collect();
-                // Pass 2: dx = 1/σ · (e·γ − mean(dx̂) − x̂ · mean(dx̂·x̂)).
-                for (dx, x) in dx.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
-                    for c in 0..d.c {
-                        let xhat = (x[c] - mean_c[c]) * rstd_c[c];
-                        dx[c] = rstd_c[c] * (dx[c] * gamma[c] - md_c[c] - xhat * mdx_c[c]);
-                    }
-                }
-            });
-        let (mut dgamma, mut dbeta) = (vec![0f64; d.c], vec![0f64; d.c]);
-        for part in partial.chunks(2 * d.c) {
-            for c in 0..d.c {
-                dgamma[c] += part[c];
-                dbeta[c] += part[d.c + c];
-            }
-        }
-        let tail = &mut out[x.len()..];
-        for c in 0..d.c {
-            tail[c] = dgamma[c] as f32;
-            tail[d.c + c] = dbeta[c] as f32;
-        }
+        let (dx, tail) = out.split_at_mut(x.len());
+        let (dgamma, dbeta) = tail.split_at_mut(d.c);
+        group_norm_backward(
+            &d, x, dy, gamma, beta, self.eps, self.relu, dx, dgamma, dbeta, false,
+        );
         let len = out.len();
         Ok((CpuStorage::F32(out), Shape::from(len)))
     }
@@ -292,7 +332,7 @@ pub fn max_pool_3x3_s2_nhwc(x: &Tensor) -> candle_core::Result<Tensor> {
 }
 
 /// Output size of a 3×3 / stride 2 / padding 1 pool.
-fn pooled(side: usize) -> usize {
+pub(crate) fn pooled(side: usize) -> usize {
     (side - 1) / 2 + 1
 }
 
@@ -324,6 +364,39 @@ fn argmax(x: &[f32], h: usize, w: usize, c: usize) -> Vec<u32> {
     idx
 }
 
+/// The 3×3 / stride 2 / padding 1 max-pool of channels-last samples of `(h, w, c)`, in
+/// parallel over samples.
+pub(crate) fn max_pool_forward((h, w, c): (usize, usize, usize), x: &[f32], y: &mut [f32]) {
+    let (oh, ow) = (pooled(h), pooled(w));
+    y.par_chunks_mut(oh * ow * c)
+        .zip(x.par_chunks(h * w * c))
+        .for_each(|(y, x)| {
+            for (y, &k) in y.iter_mut().zip(&argmax(x, h, w, c)) {
+                *y = x[k as usize];
+            }
+        });
+}
+
+/// `dx` (overwritten) of [`max_pool_forward`] from `x` and `dy`: each output's gradient to the
+/// input it took.
+pub(crate) fn max_pool_backward(
+    (h, w, c): (usize, usize, usize),
+    x: &[f32],
+    dy: &[f32],
+    dx: &mut [f32],
+) {
+    let per = pooled(h) * pooled(w) * c;
+    dx[..x.len()]
+        .par_chunks_mut(h * w * c)
+        .zip(x.par_chunks(h * w * c).zip(dy.par_chunks(per)))
+        .for_each(|(dx, (x, dy))| {
+            dx.fill(0.0);
+            for (&k, &g) in argmax(x, h, w, c).iter().zip(dy) {
+                dx[k as usize] += g;
+            }
+        });
+}
+
 struct MaxPool;
 
 impl CustomOp1 for MaxPool {
@@ -336,13 +409,7 @@ impl CustomOp1 for MaxPool {
         let x = values(s, l)?;
         let (oh, ow) = (pooled(h), pooled(w));
         let mut y = vec![0f32; n * oh * ow * c];
-        y.par_chunks_mut(oh * ow * c)
-            .zip(x.par_chunks(h * w * c))
-            .for_each(|(y, x)| {
-                for (y, &k) in y.iter_mut().zip(&argmax(x, h, w, c)) {
-                    *y = x[k as usize];
-                }
-            });
+        max_pool_forward((h, w, c), x, &mut y);
         Ok((CpuStorage::F32(y), Shape::from((n, oh, ow, c))))
     }
 
@@ -368,15 +435,8 @@ impl CustomOp2 for MaxPoolGrad {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let (_, h, w, c) = l1.shape().dims4()?;
         let (x, dy) = (values(s1, l1)?, values(s2, l2)?);
-        let per = pooled(h) * pooled(w) * c;
         let mut dx = vec![0f32; x.len()];
-        dx.par_chunks_mut(h * w * c)
-            .zip(x.par_chunks(h * w * c).zip(dy.par_chunks(per)))
-            .for_each(|(dx, (x, dy))| {
-                for (&k, &g) in argmax(x, h, w, c).iter().zip(dy) {
-                    dx[k as usize] += g;
-                }
-            });
+        max_pool_backward((h, w, c), x, dy, &mut dx);
         Ok((CpuStorage::F32(dx), l1.shape().clone()))
     }
 }
@@ -385,6 +445,30 @@ impl CustomOp2 for MaxPoolGrad {
 /// backward passes the gradient where the output is positive to both inputs.
 pub fn add_relu(a: &Tensor, b: &Tensor) -> candle_core::Result<Tensor> {
     a.contiguous()?.apply_op2(&b.contiguous()?, AddRelu)
+}
+
+/// `y = relu(a + b)`, in parallel.
+pub(crate) fn add_relu_forward(a: &[f32], b: &[f32], y: &mut [f32]) {
+    y[..a.len()]
+        .par_chunks_mut(1 << 14)
+        .zip(a.par_chunks(1 << 14).zip(b.par_chunks(1 << 14)))
+        .for_each(|(y, (a, b))| {
+            for ((y, &a), &b) in y.iter_mut().zip(a).zip(b) {
+                *y = (a + b).max(0.0);
+            }
+        });
+}
+
+/// `dx = dy` where `y > 0`, else 0 (the backward of a ReLU from its output), in parallel.
+pub(crate) fn relu_backward(y: &[f32], dy: &[f32], dx: &mut [f32]) {
+    dx[..y.len()]
+        .par_chunks_mut(1 << 14)
+        .zip(y.par_chunks(1 << 14).zip(dy.par_chunks(1 << 14)))
+        .for_each(|(dx, (y, dy))| {
+            for ((dx, &y), &g) in dx.iter_mut().zip(y).zip(dy) {
+                *dx = if y > 0.0 { g } else { 0.0 };
+            }
+        });
 }
 
 struct AddRelu;
@@ -406,13 +490,7 @@ impl CustomOp2 for AddRelu {
             candle_core::bail!("add_relu: {:?} and {:?}", l1.dims(), l2.dims());
         }
         let mut y = vec![0f32; a.len()];
-        y.par_chunks_mut(1 << 14)
-            .zip(a.par_chunks(1 << 14).zip(b.par_chunks(1 << 14)))
-            .for_each(|(y, (a, b))| {
-                for ((y, &a), &b) in y.iter_mut().zip(a).zip(b) {
-                    *y = (a + b).max(0.0);
-                }
-            });
+        add_relu_forward(a, b, &mut y);
         Ok((CpuStorage::F32(y), l1.shape().clone()))
     }
 
@@ -445,13 +523,7 @@ impl CustomOp2 for ReluGrad {
     ) -> candle_core::Result<(CpuStorage, Shape)> {
         let (y, dy) = (values(s1, l1)?, values(s2, l2)?);
         let mut dx = vec![0f32; y.len()];
-        dx.par_chunks_mut(1 << 14)
-            .zip(y.par_chunks(1 << 14).zip(dy.par_chunks(1 << 14)))
-            .for_each(|(dx, (y, dy))| {
-                for ((dx, &y), &g) in dx.iter_mut().zip(y).zip(dy) {
-                    *dx = if y > 0.0 { g } else { 0.0 };
-                }
-            });
+        relu_backward(y, dy, &mut dx);
         Ok((CpuStorage::F32(dx), l1.shape().clone()))
     }
 }

@@ -206,6 +206,7 @@ impl ScaleDp {
         for (i, enc) in self.encoders.iter().enumerate() {
             let x = crop_images(
                 images,
+                c.image_range,
                 |n| n * cams + i,
                 b * to,
                 (w, h),
@@ -249,6 +250,7 @@ fn dims(cfg: &ModelConfig) -> DenoiserDims {
         action_dim: cfg.action_dim,
         action_chunk: cfg.action_chunk,
         cond_dim: cfg.cond_dim(),
+        causal: cfg.attention == crate::config::Attention::Causal,
     }
 }
 

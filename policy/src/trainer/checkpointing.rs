@@ -12,29 +12,94 @@ use super::{open_loaders, optim::AdamW, TrainOptions, Trainer};
 use crate::checkpoint::{self, CheckpointConfig, Normalization, NormalizerConfig};
 use crate::config::{DiffusionConfig, ModelConfig};
 use crate::error::{Error, Result};
+use crate::image_chain::{ImageChain, StoredImages, TrainResize};
 use crate::model::params::Param;
 use crate::model::ScaleDp;
 use crate::scheduler::NoiseScheduler;
 
-/// `robot_type` and the `scaledp.rig` of a local dataset's `meta/info.json` (none for object
+/// What a local dataset's `meta/info.json` says about where it came from (nothing for object
 /// storage or when absent).
-fn provenance(dataset: &str) -> (Option<String>, Option<String>) {
+#[derive(Default)]
+struct Provenance {
+    robot_type: Option<String>,
+    /// `scaledp.rig`.
+    rig: Option<String>,
+    /// `scaledp.image_size` and `scaledp.jpeg_quality`: written by our converter.
+    converted: Option<((u32, u32), Option<u8>)>,
+    /// Each camera's stored (width, height) from its feature shape.
+    stored: HashMap<String, (u32, u32)>,
+}
+
+fn provenance(dataset: &str) -> Provenance {
     let path = Path::new(dataset).join("meta/info.json");
     let Ok(bytes) = std::fs::read(path) else {
-        return (None, None);
+        return Provenance::default();
     };
     let Ok(v) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
-        return (None, None);
+        return Provenance::default();
     };
     let s = |x: Option<&serde_json::Value>| {
         x.and_then(|v| v.as_str())
             .filter(|s| !s.is_empty())
             .map(String::from)
     };
-    (
-        s(v.get("robot_type")),
-        s(v.get("scaledp").and_then(|x| x.get("rig"))),
-    )
+    let sd = v.get("scaledp");
+    let size = sd
+        .and_then(|x| x.get("image_size"))
+        .and_then(|x| x.as_array())
+        .and_then(|a| Some((a.first()?.as_u64()? as u32, a.get(1)?.as_u64()? as u32)));
+    let quality = sd
+        .and_then(|x| x.get("jpeg_quality"))
+        .and_then(|x| x.as_u64())
+        .map(|q| q as u8);
+    let stored = v
+        .get("features")
+        .and_then(|f| f.as_object())
+        .map(|f| {
+            f.iter()
+                .filter_map(|(k, f)| {
+                    let f: scaledp_datasets::Feature = serde_json::from_value(f.clone()).ok()?;
+                    Some((k.clone(), f.image_size()?))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    Provenance {
+        robot_type: s(v.get("robot_type")),
+        rig: s(sd.and_then(|x| x.get("rig"))),
+        converted: size.map(|s| (s, quality)),
+        stored,
+    }
+}
+
+/// The image chain of a run on `dataset`'s cameras at the model's input size.
+fn image_chain(p: &Provenance, model: &ModelConfig) -> ImageChain {
+    let input = (model.image_width, model.image_height);
+    let stored = model
+        .cameras
+        .first()
+        .and_then(|c| p.stored.get(c).copied())
+        .or(p.converted.map(|c| c.0))
+        .unwrap_or(input);
+    let (made_by, jpeg_quality) = match p.converted {
+        Some((size, q)) if size == stored => ("scaledp-convert", q),
+        _ => ("unknown", None),
+    };
+    ImageChain {
+        stored: StoredImages {
+            width: stored.0,
+            height: stored.1,
+            made_by: made_by.into(),
+            jpeg_quality,
+        },
+        train_resize: (stored != input).then(|| TrainResize {
+            width: input.0,
+            height: input.1,
+            filter: "bilinear".into(),
+        }),
+        crop: model.crop,
+        range: model.image_range,
+    }
 }
 
 /// The model and checkpoint configuration a run on `loader`'s data gets.
@@ -61,8 +126,14 @@ pub(super) fn config_for(
     model.action_chunk = o.action_chunk;
     model.crop = o.crop;
     model.resnet_width = o.resnet_width;
+    model.image_range = o.image_range;
+    model.attention = o.attention;
     model.validate()?;
-    let (robot_type, rig) = provenance(dataset);
+    let prov = provenance(dataset);
+    let images = (!model.cameras.is_empty()).then(|| image_chain(&prov, &model));
+    let Provenance {
+        robot_type, rig, ..
+    } = prov;
     let n = loader.normalizer();
     Ok(CheckpointConfig {
         format: checkpoint::FORMAT.into(),
@@ -83,6 +154,7 @@ pub(super) fn config_for(
         seed: o.seed,
         loader: None,
         train: serde_json::Value::Null,
+        images,
     })
 }
 
@@ -220,5 +292,6 @@ pub(super) fn resume(run: &Path, steps: Option<u64>, device: &Device) -> Result<
         metrics: std::io::BufWriter::new(file),
         stop: Arc::new(AtomicBool::new(false)),
         last_checkpoint: Some(dir),
+        engine: Default::default(),
     })
 }

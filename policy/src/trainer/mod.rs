@@ -6,6 +6,7 @@
 //! the loader's, resumed from its saved position.
 
 pub(crate) mod checkpointing;
+mod loss;
 pub(crate) mod optim;
 mod options;
 mod validate;
@@ -16,20 +17,22 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use candle_core::{Device, Tensor};
-use rand::{Rng, SeedableRng};
+use candle_core::Device;
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use scaledp_datasets::{Batch, Loader, LoaderOptions, Norm, Split};
 use serde::Serialize;
 
 use crate::checkpoint::CheckpointConfig;
 use crate::error::{Error, Result};
-use crate::model::params::{randn, Param};
-use crate::model::{Crop, ScaleDp};
+use crate::model::params::Param;
+use crate::model::ScaleDp;
 use crate::scheduler::NoiseScheduler;
+pub(crate) use loss::{candle_loss_and_grads, loss_and_grads};
+pub use loss::{LossSpec, Phases};
 use optim::AdamW;
 pub use optim::{AdamWConfig, EmaConfig};
-pub use options::{cosine_lr, TrainOptions};
+pub use options::{cosine_lr, StateNorm, TrainOptions};
 pub use validate::ValRecord;
 
 /// What one optimizer step did (one line of `metrics.jsonl`).
@@ -97,6 +100,8 @@ pub struct Trainer {
     metrics: std::io::BufWriter<std::fs::File>,
     stop: Arc<AtomicBool>,
     last_checkpoint: Option<PathBuf>,
+    /// The CPU engine's buffers (unused on other devices).
+    engine: crate::engine::Engine,
 }
 
 impl std::fmt::Debug for Trainer {
@@ -128,7 +133,7 @@ fn open_loaders(dataset: &str, o: &TrainOptions) -> Result<(Loader, Option<Loade
             .seed(o.seed)
             .shuffle(shuffle)
             .threads(o.loader_threads)
-            .state_norm(Norm::MeanStd)
+            .state_norm(o.state_norm.loader())
             .action_norm(Norm::MinMax);
         if let Some(c) = &o.cameras {
             l = l.cameras(c.clone());
@@ -208,6 +213,7 @@ impl Trainer {
             metrics: std::io::BufWriter::new(file),
             stop: Arc::new(AtomicBool::new(false)),
             last_checkpoint: None,
+            engine: Default::default(),
         })
     }
 
@@ -294,9 +300,11 @@ impl Trainer {
         let micro = self.opts.micro_batch;
         let (loss, grads) = loss_and_grads(
             &self.model,
+            &mut self.engine,
             &self.scheduler,
             self.optim.params(),
             &batch,
+            self.opts.loss,
             micro,
             &mut rng,
             &mut Phases::default(),
@@ -418,102 +426,6 @@ impl Trainer {
             .and_then(|()| self.metrics.flush())
             .map_err(|e| Error::io(&path, e))
     }
-}
-
-/// Where a step's time went (s), summed over its micro-batches.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Phases {
-    /// Cropping the images and the encoders' forward passes.
-    pub encode_s: f64,
-    /// The denoiser's forward pass and the loss.
-    pub denoise_s: f64,
-    /// The backward pass (and summing micro-batch gradients).
-    pub backward_s: f64,
-}
-
-/// The batch's loss and the gradients of every parameter in `params` (`None` for one the loss
-/// does not reach), summed over micro-batches of at most `micro` samples; the draws (crops,
-/// timesteps, noise) come from `rng`.
-pub(crate) fn loss_and_grads(
-    model: &ScaleDp,
-    scheduler: &NoiseScheduler,
-    params: &[Param],
-    batch: &Batch,
-    micro: Option<usize>,
-    rng: &mut ChaCha8Rng,
-    phases: &mut Phases,
-) -> Result<(f32, Vec<Option<Tensor>>)> {
-    let c = model.config();
-    let (b, a) = (batch.len, c.action_dim);
-    let per_img =
-        c.obs_horizon * c.cameras.len() * 3 * c.image_width as usize * c.image_height as usize;
-    let valid = batch.action_is_pad.iter().filter(|p| !**p).count();
-    let denom = (valid.max(1) * a) as f64;
-    let step = micro.unwrap_or(b).clamp(1, b.max(1));
-    let mut total = 0f32;
-    let mut grads: Vec<Option<Tensor>> = vec![None; params.len()];
-    for s0 in (0..b).step_by(step) {
-        let n = step.min(b - s0);
-        let loss = micro_loss(model, scheduler, batch, s0, n, per_img, denom, rng, phases)?;
-        total += loss.to_scalar::<f32>()?;
-        let t0 = Instant::now();
-        let mut g = loss.backward()?;
-        for (acc, p) in grads.iter_mut().zip(params) {
-            if let Some(gi) = g.remove(p.var.as_tensor()) {
-                *acc = Some(match acc.take() {
-                    None => gi,
-                    Some(prev) => (prev + gi)?,
-                });
-            }
-        }
-        phases.backward_s += t0.elapsed().as_secs_f64();
-    }
-    Ok((total, grads))
-}
-
-/// The summed masked squared error of samples `s0 .. s0 + n`, divided by `denom`.
-#[allow(clippy::too_many_arguments)]
-fn micro_loss(
-    model: &ScaleDp,
-    scheduler: &NoiseScheduler,
-    batch: &Batch,
-    s0: usize,
-    n: usize,
-    per_img: usize,
-    denom: f64,
-    rng: &mut ChaCha8Rng,
-    phases: &mut Phases,
-) -> Result<Tensor> {
-    let c = model.config();
-    let (to, ch, a, s) = (c.obs_horizon, c.action_chunk, c.action_dim, c.state_dim);
-    let dev = model.device();
-    let t0 = Instant::now();
-    let images = &batch.images[s0 * per_img..(s0 + n) * per_img];
-    let state = &batch.state[s0 * to * s..(s0 + n) * to * s];
-    let cond = model.encode(images, state, n, Crop::Random, rng)?;
-    let t1 = Instant::now();
-    let t: Vec<usize> = (0..n)
-        .map(|_| rng.random_range(0..scheduler.train_steps()))
-        .collect();
-    let noise = Tensor::from_vec(randn(rng, n * ch * a), (n, ch, a), dev)?;
-    let x0 = Tensor::from_slice(
-        &batch.action[s0 * ch * a..(s0 + n) * ch * a],
-        (n, ch, a),
-        dev,
-    )?;
-    let noisy = scheduler.add_noise(&x0, &noise, &t)?;
-    let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
-    let eps = model.predict_noise(&noisy, &tf, &cond)?;
-    let mask: Vec<f32> = batch.action_is_pad[s0 * ch..(s0 + n) * ch]
-        .iter()
-        .map(|&p| if p { 0.0 } else { 1.0 })
-        .collect();
-    let mask = Tensor::from_vec(mask, (n, ch, 1), dev)?;
-    let se = (eps - noise)?.sqr()?.broadcast_mul(&mask)?;
-    let loss = (se.sum_all()? / denom)?;
-    phases.encode_s += (t1 - t0).as_secs_f64();
-    phases.denoise_s += t1.elapsed().as_secs_f64();
-    Ok(loss)
 }
 
 /// Refuses a batch holding a non-finite state or action value, naming its sample.

@@ -21,8 +21,20 @@ pub struct AdamWConfig {
     pub beta2: f64,
     /// ε (1e-8).
     pub eps: f64,
-    /// Decoupled weight decay on the decayed group (1e-3).
+    /// Decoupled weight decay on the denoiser's Linear weights (1e-3, diffusion_policy's
+    /// `transformer_weight_decay`).
     pub weight_decay: f64,
+    /// Decoupled weight decay on every encoder parameter (1e-6, diffusion_policy's
+    /// `obs_encoder_weight_decay`, which its DP-T policy applies to the whole
+    /// `obs_encoder.parameters()` group).
+    #[serde(default = "legacy_encoder_decay")]
+    pub encoder_weight_decay: f64,
+}
+
+/// Runs saved before the encoders had their own group decayed their Linear/Conv weights at
+/// `weight_decay` and nothing else; `NaN` marks that.
+fn legacy_encoder_decay() -> f64 {
+    f64::NAN
 }
 
 impl Default for AdamWConfig {
@@ -32,7 +44,21 @@ impl Default for AdamWConfig {
             beta2: 0.95,
             eps: 1e-8,
             weight_decay: 1e-3,
+            encoder_weight_decay: 1e-6,
         }
+    }
+}
+
+/// The weight decay of parameter `p`: the encoders' group (every `obs_encoder.*` tensor) or
+/// the denoiser's (Linear weights only).
+fn decay_of(p: &Param, c: &AdamWConfig) -> f64 {
+    let encoder = p.name.starts_with("obs_encoder.");
+    if encoder && !c.encoder_weight_decay.is_nan() {
+        c.encoder_weight_decay
+    } else if p.decay {
+        c.weight_decay
+    } else {
+        0.0
     }
 }
 
@@ -106,7 +132,7 @@ impl AdamW {
             let Some(g) = g else {
                 continue;
             };
-            let wd = if p.decay { c.weight_decay } else { 0.0 };
+            let wd = decay_of(p, &c);
             match mom {
                 Moments::Host { m, v } => {
                     let op = FusedAdamW {

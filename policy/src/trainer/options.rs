@@ -2,8 +2,47 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::ModelSize;
+use crate::config::{Attention, ImageRange, ModelSize};
+use crate::trainer::loss::LossSpec;
 use crate::trainer::optim::{AdamWConfig, EmaConfig};
+
+/// How the loader normalizes the state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StateNorm {
+    /// [−1, 1] over the dataset's range, as the actions (diffusion_policy's `limits`, LeRobot's
+    /// `MIN_MAX`).
+    #[default]
+    MinMax,
+    /// (x − mean) / std.
+    MeanStd,
+}
+
+impl StateNorm {
+    pub(crate) fn loader(self) -> scaledp_datasets::Norm {
+        match self {
+            StateNorm::MinMax => scaledp_datasets::Norm::MinMax,
+            StateNorm::MeanStd => scaledp_datasets::Norm::MeanStd,
+        }
+    }
+}
+
+/// What runs saved before a setting existed used (so they resume as they started).
+mod legacy {
+    use super::*;
+    pub fn loss() -> LossSpec {
+        LossSpec {
+            noise_samples: 1,
+            mask_padding: true,
+        }
+    }
+    pub fn state_norm() -> StateNorm {
+        StateNorm::MeanStd
+    }
+    pub fn image_range() -> ImageRange {
+        ImageRange::Unit
+    }
+}
 
 /// Options of a training run; every default is the paper's / diffusion_policy's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -32,6 +71,14 @@ pub struct TrainOptions {
     pub(crate) crop: f64,
     pub(crate) loader_threads: usize,
     pub(crate) max_episodes: Option<usize>,
+    #[serde(default = "legacy::loss")]
+    pub(crate) loss: LossSpec,
+    #[serde(default = "legacy::state_norm")]
+    pub(crate) state_norm: StateNorm,
+    #[serde(default = "legacy::image_range")]
+    pub(crate) image_range: ImageRange,
+    #[serde(default)]
+    pub(crate) attention: Attention,
 }
 
 impl Default for TrainOptions {
@@ -60,6 +107,10 @@ impl Default for TrainOptions {
             crop: 0.9,
             loader_threads: 0,
             max_episodes: None,
+            loss: LossSpec::default(),
+            state_norm: StateNorm::MinMax,
+            image_range: ImageRange::Symmetric,
+            attention: Attention::NonCausal,
         }
     }
 }
@@ -183,6 +234,37 @@ impl TrainOptions {
         self
     }
 
+    /// (timestep, noise) draws per encoded observation (default 1; see [`LossSpec`]).
+    pub fn noise_samples(mut self, k: usize) -> Self {
+        self.loss.noise_samples = k.max(1);
+        self
+    }
+    /// Leave padded action steps out of the loss (default: train on them, as diffusion_policy
+    /// and LeRobot do).
+    pub fn mask_padding(mut self, on: bool) -> Self {
+        self.loss.mask_padding = on;
+        self
+    }
+    /// The state's normalization (default min–max to [−1, 1]).
+    pub fn state_norm(mut self, norm: StateNorm) -> Self {
+        self.state_norm = norm;
+        self
+    }
+    /// The encoders' pixel range (default [−1, 1]).
+    pub fn image_range(mut self, range: ImageRange) -> Self {
+        self.image_range = range;
+        self
+    }
+    /// The denoiser's attention (default non-causal; causal for the ablation).
+    pub fn attention(mut self, attention: Attention) -> Self {
+        self.attention = attention;
+        self
+    }
+
+    /// The loss settings.
+    pub fn get_loss(&self) -> LossSpec {
+        self.loss
+    }
     /// The seed.
     pub fn get_seed(&self) -> u64 {
         self.seed

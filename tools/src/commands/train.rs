@@ -7,7 +7,9 @@ use std::sync::atomic::Ordering;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use scaledp_policy::model::ScaleDp;
-use scaledp_policy::{Event, ModelConfig, ModelSize, TrainOptions, Trainer};
+use scaledp_policy::{
+    AdamWConfig, Event, ModelConfig, ModelSize, StateNorm, TrainOptions, Trainer,
+};
 
 use crate::cli::ExitStatus;
 
@@ -74,6 +76,33 @@ pub struct TrainArgs {
     /// Cameras to use, comma-separated short names (default: all).
     #[arg(long, value_delimiter = ',')]
     pub cameras: Vec<String>,
+    /// Channels of the ResNet-18 trunks' first stage (64: the paper's encoder; 32 or 16 cost
+    /// 4 or 16 times less).
+    #[arg(long, default_value_t = 64)]
+    pub resnet_width: usize,
+    /// (timestep, noise) draws per encoded observation: the encoders run once per sample and
+    /// the denoiser this many times.
+    #[arg(long, default_value_t = 1)]
+    pub noise_samples: usize,
+    /// The denoiser's attention over the action chunk: non-causal (ScaleDP) or causal (the
+    /// DP-T-style ablation).
+    #[arg(long, default_value = "non-causal")]
+    pub attention: String,
+    /// Leave action steps past an episode's end out of the loss (default: train on them, as
+    /// diffusion_policy and LeRobot do: they repeat the last action).
+    #[arg(long)]
+    pub mask_padding: bool,
+    /// The state's normalization: min-max ([-1, 1], diffusion_policy's and LeRobot's) or
+    /// mean-std.
+    #[arg(long, default_value = "min-max")]
+    pub state_norm: String,
+    /// Weight decay of the denoiser's Linear weights (diffusion_policy's
+    /// transformer_weight_decay).
+    #[arg(long, default_value_t = 1e-3)]
+    pub weight_decay: f64,
+    /// Weight decay of every encoder parameter (diffusion_policy's obs_encoder_weight_decay).
+    #[arg(long, default_value_t = 1e-6)]
+    pub encoder_weight_decay: f64,
     /// Print the parameter counts and stop.
     #[arg(long)]
     pub dry_run: bool,
@@ -112,7 +141,21 @@ fn options(a: &TrainArgs, model: ModelSize) -> Result<TrainOptions> {
         .val_ratio(a.val_ratio)
         .crop(a.crop)
         .obs_horizon(a.obs_horizon)
-        .action_chunk(a.action_chunk);
+        .action_chunk(a.action_chunk)
+        .resnet_width(a.resnet_width)
+        .noise_samples(a.noise_samples)
+        .attention(a.attention.parse()?)
+        .mask_padding(a.mask_padding)
+        .state_norm(match a.state_norm.as_str() {
+            "min-max" | "min_max" => StateNorm::MinMax,
+            "mean-std" | "mean_std" => StateNorm::MeanStd,
+            other => bail!("--state-norm {other}: min-max or mean-std"),
+        })
+        .adamw(AdamWConfig {
+            weight_decay: a.weight_decay,
+            encoder_weight_decay: a.encoder_weight_decay,
+            ..AdamWConfig::default()
+        });
     if let Some(s) = a.steps {
         o = o.steps(s);
     }
