@@ -59,6 +59,14 @@ fn a_checkpoint_loads_back_to_bit_identical_outputs() {
     assert_eq!(policy.dir(), dir.as_path());
     let cfg = policy.config();
     assert_eq!(cfg.robot_type.as_deref(), Some("test_arm"));
+    // The anchors' defaults: state and actions min-max to [-1, 1], images in [-1, 1],
+    // padded actions trained on, the encoders decayed at 1e-6.
+    assert_eq!(cfg.normalizer.state.norm, "min_max");
+    assert_eq!(cfg.normalizer.action.norm, "min_max");
+    assert_eq!(cfg.model.image_range, scaledp_policy::ImageRange::Symmetric);
+    assert_eq!(cfg.train["loss"]["mask_padding"], false);
+    assert_eq!(cfg.train["adamw"]["encoder_weight_decay"], 1e-6);
+    assert_eq!(cfg.train["adamw"]["weight_decay"], 1e-3);
     assert_eq!(cfg.rig.as_deref(), Some("test_rig"));
     assert_eq!(
         cfg.model.cameras,

@@ -135,3 +135,72 @@ pub fn write(root: &Path, spec: &Spec) -> PathBuf {
     .unwrap();
     dir
 }
+
+/// Replays a recording message by message into `ctl`, ticking on the converter's grid (a
+/// quarter frame period after the first frame, one control period apart) for `ticks` ticks,
+/// each called once the clock is the controller's lag past it with every message stamped until
+/// then in (receive = capture, as in simulated time); a chunk of zeros is installed after every
+/// tick, so that every tick asks for one and shows its window. Returns (tick, window).
+pub fn replay(
+    ctl: &mut scaledp_deploy::Controller,
+    rig: &Rig,
+    rec: &scaledp_converter::Recording,
+    ticks: u64,
+) -> Vec<(u64, scaledp_policy::Observation)> {
+    use scaledp_schema::msg::{Image, JointState};
+    use scaledp_schema::RosMessage;
+    let mut msgs: Vec<(u64, &scaledp_converter::RawMessage)> = rec
+        .messages
+        .iter()
+        .filter_map(|m| {
+            let stamp = if m.message_type.ends_with("Image") {
+                Image::from_cdr(&m.data).ok()?.header.stamp.as_ns()
+            } else if m.message_type.ends_with("JointState") {
+                JointState::from_cdr(&m.data).ok()?.header.stamp.as_ns()
+            } else {
+                return None;
+            };
+            Some((stamp, m))
+        })
+        .collect();
+    msgs.sort_by_key(|m| m.0);
+    let first_frame = msgs
+        .iter()
+        .find(|m| m.1.message_type.ends_with("Image"))
+        .unwrap()
+        .0;
+    let origin = first_frame + (1e9 / 30.0 / 4.0_f64).round() as u64;
+    let step = (1e9 / 10.0) as u64;
+    let dim = 7 * rig.arms.len();
+    let mut next = 0;
+    let mut windows = Vec::new();
+    for k in 0..ticks {
+        let t = origin + k * step;
+        while next < msgs.len() && msgs[next].0 <= t + ctl.obs_lag_ns() {
+            let (stamp, m) = msgs[next];
+            next += 1;
+            if let Some(c) = rig.cameras.iter().position(|c| c.topic == m.topic) {
+                ctl.on_image(c, stamp, stamp, &m.message_type, m.data.clone());
+            } else if let Some(a) = rig.arms.iter().position(|a| a.joint_state_topic == m.topic) {
+                ctl.on_joint_state(a, false, stamp, &JointState::from_cdr(&m.data).unwrap());
+            } else if let Some(a) = rig
+                .arms
+                .iter()
+                .position(|a| a.gripper.as_ref().is_some_and(|g| g.topic == m.topic))
+            {
+                ctl.on_joint_state(a, true, stamp, &JointState::from_cdr(&m.data).unwrap());
+            }
+        }
+        let tick = ctl.tick(t + ctl.obs_lag_ns());
+        if let Some(req) = tick.request {
+            windows.push((k, req.observation.clone()));
+            let chunk = scaledp_policy::ActionChunk {
+                actions: vec![0.0; 16 * dim],
+                chunk: 16,
+                dim,
+            };
+            ctl.install(req.index, &chunk);
+        }
+    }
+    windows
+}

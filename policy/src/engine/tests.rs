@@ -159,3 +159,51 @@ fn ddim_samples_match_the_candle_path() {
         .unwrap();
     assert!(d < 1e-4, "samples differ by {d}");
 }
+
+/// Padded action steps count in the loss unless masked (diffusion_policy and LeRobot train on
+/// them; they repeat the episode's last action).
+#[test]
+fn padded_steps_are_trained_on_unless_masked() {
+    let cfg = tiny(Attention::NonCausal);
+    let dev = Device::Cpu;
+    let (model, params) = ScaleDp::fresh(&cfg, 3, &dev).unwrap();
+    let sched = NoiseScheduler::new(100).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut batch = crate::bench::synthetic_batch(&cfg, 2, &mut rng);
+    batch.action_is_pad.iter_mut().for_each(|p| *p = true);
+    for mask_padding in [false, true] {
+        let spec = LossSpec {
+            noise_samples: 1,
+            mask_padding,
+        };
+        let mut r = ChaCha8Rng::seed_from_u64(1);
+        let (loss, grads) = loss_and_grads(
+            &model,
+            &mut Engine::default(),
+            &sched,
+            &params,
+            &batch,
+            spec,
+            None,
+            &mut r,
+            &mut Phases::default(),
+        )
+        .unwrap();
+        let moved = grads.iter().flatten().any(|g| {
+            g.abs()
+                .unwrap()
+                .max_all()
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap()
+                > 0.0
+        });
+        if mask_padding {
+            assert_eq!(loss, 0.0);
+            assert!(!moved, "masked: no gradient");
+        } else {
+            assert!(loss > 0.1, "all-padded batch still trains: loss {loss}");
+            assert!(moved);
+        }
+    }
+}

@@ -378,3 +378,48 @@ impl InplaceOp2 for EmaOp {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{Device, Var};
+
+    fn param(name: &str, decay: bool) -> Param {
+        Param {
+            name: name.into(),
+            var: Var::zeros(1, candle_core::DType::F32, &Device::Cpu).unwrap(),
+            decay,
+        }
+    }
+
+    /// diffusion_policy's groups: every encoder tensor at the encoder decay, the denoiser's
+    /// Linear weights at the transformer decay, nothing else; runs saved before the encoder
+    /// group (NaN) keep the old single group.
+    #[test]
+    fn decay_groups_follow_diffusion_policy() {
+        let c = AdamWConfig::default();
+        assert_eq!(
+            decay_of(&param("obs_encoder.front.backbone.conv1.weight", true), &c),
+            1e-6
+        );
+        assert_eq!(
+            decay_of(&param("obs_encoder.front.backbone.bn1.bias", false), &c),
+            1e-6
+        );
+        assert_eq!(decay_of(&param("blocks.0.attn.qkv.weight", true), &c), 1e-3);
+        assert_eq!(decay_of(&param("blocks.0.attn.qkv.bias", false), &c), 0.0);
+        assert_eq!(decay_of(&param("pos_embed", false), &c), 0.0);
+        let old = AdamWConfig {
+            encoder_weight_decay: f64::NAN,
+            ..c
+        };
+        assert_eq!(
+            decay_of(&param("obs_encoder.front.linear.weight", true), &old),
+            1e-3
+        );
+        assert_eq!(
+            decay_of(&param("obs_encoder.front.linear.bias", false), &old),
+            0.0
+        );
+    }
+}
