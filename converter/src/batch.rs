@@ -2,95 +2,21 @@
 //! one failure never stopping the rest.
 
 use std::collections::BTreeMap;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 
 use rayon::prelude::*;
 use scaledp_schema::Label;
 
-use crate::episode::{convert, ConvertOptions, Episode};
+use crate::episode::{convert, Episode};
 use crate::error::{Error, Result};
 use crate::frames::FrameStore;
+use crate::inputs::{
+    content_hash, hasher_for, input_bytes, is_mcap_file, read_input, shard, useful_topic,
+};
 use crate::lerobot::{Dataset, EpisodeRecord};
-use crate::source::{Recording, TopicInfo};
-
-/// Settings of a conversion job, set with chained setters. Defaults: [`ConvertOptions`]'s
-/// defaults, no overwrite, no shard, one job per core, data files of 100 MiB, `failure`
-/// episodes skipped, no split.
-///
-/// ```no_run
-/// use scaledp_converter::{ConvertOptions, JobOptions};
-/// let opts = JobOptions::default()
-///     .convert(ConvertOptions::default().task("stack the cups"))
-///     .jobs(4);
-/// let results = scaledp_converter::run(&["demos/episode_000000.mcap".into()], "ds".as_ref(), &opts, &|_| {})?;
-/// # Ok::<(), scaledp_converter::Error>(())
-/// ```
-#[derive(Debug, Clone)]
-pub struct JobOptions {
-    convert: ConvertOptions,
-    overwrite: bool,
-    shard: Option<(usize, usize)>,
-    jobs: usize,
-    file_size_mib: u64,
-    include_failures: bool,
-    split_gap_s: Option<f64>,
-}
-
-impl Default for JobOptions {
-    fn default() -> Self {
-        Self {
-            convert: ConvertOptions::default(),
-            overwrite: false,
-            shard: None,
-            jobs: std::thread::available_parallelism().map_or(2, usize::from),
-            file_size_mib: 100,
-            include_failures: false,
-            split_gap_s: None,
-        }
-    }
-}
-
-impl JobOptions {
-    /// Per-episode conversion settings.
-    pub fn convert(mut self, convert: ConvertOptions) -> Self {
-        self.convert = convert;
-        self
-    }
-    /// Reconvert inputs already in the dataset: the dataset is rebuilt from scratch.
-    pub fn overwrite(mut self, yes: bool) -> Self {
-        self.overwrite = yes;
-        self
-    }
-    /// Convert only slice `i` of `n` of the sorted inputs (contiguous, so merging the shards in
-    /// order equals one run); `run` refuses `i >= n`.
-    pub fn shard(mut self, i: usize, n: usize) -> Self {
-        self.shard = Some((i, n));
-        self
-    }
-    /// Episodes converted at once (each holds its recording in memory; at least 1).
-    pub fn jobs(mut self, n: usize) -> Self {
-        self.jobs = n.max(1);
-        self
-    }
-    /// Data file size target in MiB (LeRobot's `data_files_size_in_mb`, which LeRobot itself
-    /// measures in MiB): a file is closed once it reaches it.
-    pub fn file_size_mib(mut self, mib: u64) -> Self {
-        self.file_size_mib = mib;
-        self
-    }
-    /// Also convert episodes whose recorded outcome is `failure`.
-    pub fn include_failures(mut self, yes: bool) -> Self {
-        self.include_failures = yes;
-        self
-    }
-    /// Split an input into several episodes wherever no message was logged for `seconds`.
-    pub fn split_gap(mut self, seconds: f64) -> Self {
-        self.split_gap_s = Some(seconds);
-        self
-    }
-}
+use crate::options::{ConvertOptions, JobOptions};
+use crate::source::Recording;
 
 /// What happened to one input of a [`run`].
 #[derive(Debug)]
@@ -120,134 +46,6 @@ pub enum Progress<'a> {
         /// Bytes of the input.
         bytes: u64,
     },
-}
-
-/// Expands directories into inputs: rosbag2 directories (with `metadata.yaml`), `.mcap`,
-/// `.bag` and `.db3` files; skips `*.partial` files and `discarded/` directories. Sorted.
-pub fn collect_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
-    fn walk(p: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
-        if p.is_dir() {
-            if p.join("metadata.yaml").exists() {
-                out.push(p.into());
-                return Ok(());
-            }
-            if p.file_name().is_some_and(|n| n == "discarded") {
-                return Ok(());
-            }
-            for e in std::fs::read_dir(p).map_err(Error::io(p))?.flatten() {
-                walk(&e.path(), out)?;
-            }
-        } else if matches!(
-            p.extension().and_then(|e| e.to_str()),
-            Some("mcap" | "bag" | "db3")
-        ) {
-            out.push(p.into());
-        }
-        Ok(())
-    }
-    let mut out = Vec::new();
-    for p in paths {
-        if !p.exists() {
-            return Err(Error::input(p, "no such file or directory"));
-        }
-        if p.is_file()
-            && !matches!(
-                p.extension().and_then(|e| e.to_str()),
-                Some("mcap" | "bag" | "db3")
-            )
-        {
-            return Err(Error::input(
-                p,
-                "not an .mcap, .bag or .db3 file, nor a directory",
-            ));
-        }
-        walk(p, &mut out)?;
-    }
-    out.sort();
-    out.dedup();
-    Ok(out)
-}
-
-/// The inputs of shard `i` of `n`: a contiguous slice of the sorted list.
-pub fn shard(inputs: &[PathBuf], i: usize, n: usize) -> &[PathBuf] {
-    let len = inputs.len();
-    &inputs[len * i / n..len * (i + 1) / n]
-}
-
-/// A hasher fed the file name, as [`content_hash`] starts for each file.
-fn hasher_for(path: &Path) -> blake3::Hasher {
-    let mut h = blake3::Hasher::new();
-    h.update(
-        path.file_name()
-            .map(|n| n.as_encoded_bytes())
-            .unwrap_or_default(),
-    );
-    h
-}
-
-/// BLAKE3 of a file, or of a directory's files (names and contents, in name order).
-pub fn content_hash(path: &Path) -> Result<String> {
-    let mut h = blake3::Hasher::new();
-    let mut files = vec![];
-    if path.is_dir() {
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(Error::io(path))?
-            .flatten()
-            .map(|e| e.path())
-            .collect();
-        entries.sort();
-        files.extend(entries.into_iter().filter(|p| p.is_file()));
-    } else {
-        files.push(path.to_path_buf());
-    }
-    for f in files {
-        h.update(
-            f.file_name()
-                .map(|n| n.as_encoded_bytes())
-                .unwrap_or_default(),
-        );
-        let mut file = std::fs::File::open(&f).map_err(Error::io(&f))?;
-        let mut buf = vec![0u8; 1 << 20];
-        loop {
-            let n = file.read(&mut buf).map_err(Error::io(&f))?;
-            if n == 0 {
-                break;
-            }
-            h.update(&buf[..n]);
-        }
-    }
-    Ok(h.finalize().to_hex().to_string())
-}
-
-fn input_bytes(path: &Path) -> u64 {
-    if path.is_dir() {
-        std::fs::read_dir(path)
-            .into_iter()
-            .flatten()
-            .flatten()
-            .filter_map(|e| e.metadata().ok())
-            .map(|m| m.len())
-            .sum()
-    } else {
-        std::fs::metadata(path).map_or(0, |m| m.len())
-    }
-}
-
-/// The message types a conversion can use.
-fn useful_topic(t: &TopicInfo) -> bool {
-    crate::source::is_read(&t.message_type)
-}
-
-/// Reads any supported input whole, keeping only the topics a conversion can use.
-pub fn read_input(path: &Path) -> Result<Recording> {
-    let want = useful_topic;
-    if path.is_dir() || path.extension().is_some_and(|e| e == "db3") {
-        return crate::read_rosbag2(path, &want);
-    }
-    match path.extension().and_then(|e| e.to_str()) {
-        Some("bag") => crate::read_ros1_bag(path, &want),
-        _ => crate::read_mcap(path, &want),
-    }
 }
 
 /// Log-time windows `[start, end)` separated by gaps longer than `gap_s` (one window, all of
@@ -301,10 +99,6 @@ fn fully_converted(existing: &[String], h: &str) -> bool {
         .and_then(|p| p.split_once('/'))
         .and_then(|(_, n)| n.parse::<usize>().ok());
     n.is_some_and(|n| (0..n).all(|k| parts.contains(&format!("{k}/{n}").as_str())))
-}
-
-fn is_mcap_file(path: &Path) -> bool {
-    path.is_file() && path.extension().is_some_and(|e| e == "mcap")
 }
 
 /// Converts one input; for an MCAP file with `hash`, also returns its [`content_hash`], taken

@@ -9,10 +9,12 @@ use std::sync::{Mutex, MutexGuard};
 
 use crate::error::Error;
 use crate::error::Result;
-use crate::frames::FrameKey;
 use crate::images::{encode_message, EncodeSpec, EncodedFrame};
 use crate::mcap_stream::FrameBytes;
 use crate::source::Serialization;
+
+/// A camera frame: (topic, stored ordinal).
+pub type FrameKey = (String, usize);
 
 /// One CDR camera message to encode.
 #[derive(Debug)]

@@ -6,165 +6,15 @@ use std::path::{Path, PathBuf};
 
 use scaledp_schema::rig::Rig;
 
+use crate::actions::command_actions;
 use crate::align::{align, Alignment, AlignmentReport, Stream};
 use crate::error::{Error, Result};
 use crate::frames::FrameStore;
 use crate::images::{ChannelHistogram, EncodeSpec};
 use crate::kinematics::ArmKinematics;
-use crate::series::{stamp_of, unwrap_pose_angles, CommandPoses, JointSeries, Ordered};
-use crate::source::{RawMessage, Recording};
-
-/// How to convert one input, set with chained setters. Defaults: the rig given, else the one
-/// stored in the recording, else one detected; the rig's control rate; 320×240 JPEG at quality
-/// 90; a frame staler than 1.5 of its periods invalidates a tick; at most 5 % invalid ticks;
-/// header stamps as time; messages up to 0.1 s out of stamp order put back in order.
-///
-/// ```
-/// use scaledp_converter::ConvertOptions;
-/// let opts = ConvertOptions::default()
-///     .size(320, 240)
-///     .jpeg_quality(90)
-///     .task("put the cup on the plate")
-///     .topic_override("wrist", "/camera/wrist/image_raw");
-/// # let _ = opts;
-/// ```
-///
-/// The fields are public for the callers that still build the struct literally
-/// (`sim/tests/record_convert.rs`); they become private once none does: use the setters.
-#[derive(Debug, Clone)]
-pub struct ConvertOptions {
-    /// Rig to map topics with (else the one stored in the recording, else detected).
-    #[doc(hidden)]
-    pub rig: Option<Rig>,
-    /// Target rate (Hz); the rig's control rate when None.
-    #[doc(hidden)]
-    pub fps: Option<f64>,
-    /// Output image width.
-    #[doc(hidden)]
-    pub width: u32,
-    /// Output image height.
-    #[doc(hidden)]
-    pub height: u32,
-    /// JPEG quality.
-    #[doc(hidden)]
-    pub jpeg_quality: u8,
-    /// A camera frame older than this many of its periods invalidates a tick.
-    #[doc(hidden)]
-    pub stale_periods: f64,
-    /// Largest fraction of invalid ticks an episode may keep.
-    #[doc(hidden)]
-    pub max_invalid_fraction: f64,
-    /// Task when the recording stores none.
-    #[doc(hidden)]
-    pub task: Option<String>,
-    /// Align on log (receive) times instead of header stamps.
-    #[doc(hidden)]
-    pub use_log_time: bool,
-    /// Convert only messages logged in `[start, end)` (ns): one part of a split recording (set
-    /// by the batch job).
-    #[doc(hidden)]
-    pub window_ns: Option<(u64, u64)>,
-    /// (name, topic): read camera / arm `name` (or `<arm>_gripper`, `<arm>_command`) from
-    /// `topic` instead of the rig's.
-    #[doc(hidden)]
-    pub topic_overrides: Vec<(String, String)>,
-    /// How far back (s) a stamp may lie behind one stored before it on its topic and be put
-    /// back in order; further back is a clock jump.
-    #[doc(hidden)]
-    pub reorder_window_s: f64,
-}
-
-impl ConvertOptions {
-    /// Maps topics with `rig` (default: the rig stored in the recording, else one detected from
-    /// message types and joint names).
-    pub fn rig(mut self, rig: Rig) -> Self {
-        self.rig = Some(rig);
-        self
-    }
-    /// Ticks at `hz` (default: the rig's control rate).
-    pub fn fps(mut self, hz: f64) -> Self {
-        self.fps = Some(hz);
-        self
-    }
-    /// Stored image size (default 320×240).
-    pub fn size(mut self, width: u32, height: u32) -> Self {
-        self.width = width;
-        self.height = height;
-        self
-    }
-    /// JPEG quality of stored images, 1–100 (default 90).
-    pub fn jpeg_quality(mut self, quality: u8) -> Self {
-        self.jpeg_quality = quality;
-        self
-    }
-    /// A camera frame older than `periods` of its frame periods invalidates a tick (default 1.5).
-    pub fn stale_periods(mut self, periods: f64) -> Self {
-        self.stale_periods = periods;
-        self
-    }
-    /// Largest fraction of invalid ticks inside an episode (default 0.05); more rejects it.
-    pub fn max_invalid_fraction(mut self, fraction: f64) -> Self {
-        self.max_invalid_fraction = fraction;
-        self
-    }
-    /// Task instruction for inputs that store none (bags).
-    pub fn task(mut self, task: impl Into<String>) -> Self {
-        self.task = Some(task.into());
-        self
-    }
-    /// Aligns on log (receive) times instead of header stamps (default false).
-    pub fn use_log_time(mut self, yes: bool) -> Self {
-        self.use_log_time = yes;
-        self
-    }
-    /// Reads camera or arm `name` (or `<arm>_gripper`, `<arm>_command`) from `topic` instead of
-    /// the rig's (repeatable; an unknown name fails the input).
-    pub fn topic_override(mut self, name: impl Into<String>, topic: impl Into<String>) -> Self {
-        self.topic_overrides.push((name.into(), topic.into()));
-        self
-    }
-    /// Messages stamped up to `seconds` before one stored earlier on their topic are put back
-    /// in stamp order and counted (default 0.1); further back is a clock jump.
-    pub fn reorder_window(mut self, seconds: f64) -> Self {
-        self.reorder_window_s = seconds;
-        self
-    }
-    /// Whether a message logged at `log_ns` is inside the window converted.
-    pub(crate) fn in_window(&self, log_ns: u64) -> bool {
-        self.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns))
-    }
-    /// The reorder window in ns.
-    pub(crate) fn reorder_window_ns(&self) -> u64 {
-        (self.reorder_window_s.max(0.0) * 1e9).min(u64::MAX as f64) as u64
-    }
-    /// Output size and quality of frames.
-    pub(crate) fn encode_spec(&self) -> EncodeSpec {
-        EncodeSpec {
-            width: self.width,
-            height: self.height,
-            quality: self.jpeg_quality,
-        }
-    }
-}
-
-impl Default for ConvertOptions {
-    fn default() -> Self {
-        Self {
-            rig: None,
-            fps: None,
-            width: 320,
-            height: 240,
-            jpeg_quality: 90,
-            stale_periods: 1.5,
-            max_invalid_fraction: 0.05,
-            task: None,
-            use_log_time: false,
-            window_ns: None,
-            topic_overrides: Vec::new(),
-            reorder_window_s: 0.1,
-        }
-    }
-}
+pub use crate::options::ConvertOptions;
+use crate::series::{messages_of, stamp_of, unwrap_pose_angles, JointSeries, Ordered};
+use crate::source::Recording;
 
 /// One camera's frames of an episode.
 #[derive(Debug, Clone)]
@@ -269,14 +119,6 @@ fn rig_and_task(path: &Path, rec: &Recording, opts: &ConvertOptions) -> Result<(
             reason: "no task instruction: the recording stores none; pass --task".into(),
         })?;
     Ok((rig, fps, task))
-}
-
-/// The messages of `topic` logged inside the options' window, in stored order.
-fn messages_of<'r>(rec: &'r Recording, topic: &str, opts: &ConvertOptions) -> Vec<&'r RawMessage> {
-    rec.messages
-        .iter()
-        .filter(|m| m.topic == topic && opts.in_window(m.log_time_ns))
-        .collect()
 }
 
 /// A camera's frames in stamp order: the stream aligned on, and each frame's stored ordinal.
@@ -423,88 +265,6 @@ fn tick_states(
         state: state_ticks,
         joints: joint_ticks,
     })
-}
-
-/// Arms with a command topic take the action's pose from the latest command at each tick
-/// (instead of the next tick's state), its angles put on the state's branch; grippers with a
-/// command topic likewise the action's opening. Returns the messages reordered on those topics.
-#[allow(clippy::too_many_arguments)]
-fn command_actions(
-    path: &Path,
-    rig: &Rig,
-    kin: &[ArmKinematics],
-    rec: &Recording,
-    ticks_ns: &[u64],
-    state_ticks: &[Vec<f32>],
-    action: &mut [f32],
-    opts: &ConvertOptions,
-) -> Result<usize> {
-    let dim = 7 * rig.arms.len();
-    let mut reordered = 0;
-    for (a, (arm, k)) in rig.arms.iter().zip(kin).enumerate() {
-        // --- gripper command (scaledp-sim, issue 10): a gripper's `command_topic` (a leader
-        // gripper's JointState, its joints mapped by name) gives the action's gripper opening:
-        // the latest command at each tick.
-        if let Some((g, topic)) = arm
-            .gripper
-            .as_ref()
-            .and_then(|g| Some((g, g.command_topic.as_ref()?)))
-        {
-            let msgs = messages_of(rec, topic, opts);
-            let rate = rig.control_rate_hz;
-            let cmd = JointSeries::read(path, &msgs, topic, &g.joint_names, rate, opts)?;
-            if cmd.positions.is_empty() {
-                return Err(Error::Rejected {
-                    path: path.into(),
-                    reason: format!(
-                        "gripper command topic {topic} of arm '{}' has no messages",
-                        arm.name
-                    ),
-                });
-            }
-            reordered += cmd.reordered;
-            for (t, tick) in ticks_ns.iter().enumerate() {
-                let i = cmd.stream.latest_at(*tick).unwrap_or(0);
-                action[t * dim + a * 7 + 6] = g.model.width_m(&cmd.positions[i]) as f32;
-            }
-        }
-        // --- end gripper command
-        let Some(topic) = &arm.command_topic else {
-            continue;
-        };
-        let msgs = messages_of(rec, topic, opts);
-        let command = CommandPoses::read(path, &msgs, arm, k, opts)?;
-        if command.stamps_ns.is_empty() {
-            return Err(Error::Rejected {
-                path: path.into(),
-                reason: format!(
-                    "command topic {topic} of arm '{}' has no messages",
-                    arm.name
-                ),
-            });
-        }
-        reordered += command.reordered;
-        let stream = Stream::new(topic, command.stamps_ns, None);
-        let chosen: Vec<usize> = ticks_ns
-            .iter()
-            .map(|tick| stream.latest_at(*tick).unwrap_or(0))
-            .collect();
-        // Put the command's angles on the state's branch (within π of it at the first tick),
-        // so action − state never carries a spurious full turn.
-        let mut turn = [0.0; 6];
-        if let Some(&first) = chosen.first() {
-            for (d, shift) in turn.iter_mut().enumerate().skip(3) {
-                let gap = f64::from(state_ticks[0][a * 7 + d]) - command.poses[first][d];
-                *shift = std::f64::consts::TAU * (gap / std::f64::consts::TAU).round();
-            }
-        }
-        for (t, &i) in chosen.iter().enumerate() {
-            for (d, v) in command.poses[i].iter().enumerate() {
-                action[t * dim + a * 7 + d] = (*v + turn[d]) as f32;
-            }
-        }
-    }
-    Ok(reordered)
 }
 
 /// Each camera's chosen frame at each of the first `frames` ticks: decoded, resized and

@@ -12,15 +12,14 @@ use std::sync::Mutex;
 use rayon::prelude::*;
 
 use crate::encode_pool::{encode_while, Encodings, FrameJob};
-use crate::episode::ConvertOptions;
 use crate::error::{Error, Result};
 use crate::images::{encode_message, EncodeSpec, EncodedFrame};
 use crate::mcap_stream::{stream, stream_hashed};
+use crate::options::ConvertOptions;
 use crate::prefetch::Selector;
 use crate::source::{RawMessage, Recording, Serialization, TopicInfo};
 
-/// A camera frame: (topic, stored ordinal).
-pub type FrameKey = (String, usize);
+pub use crate::encode_pool::FrameKey;
 
 /// Stamps of a camera topic's frames and access to the frames themselves.
 pub trait FrameStore: Sync {

@@ -25,9 +25,10 @@ use std::time::{Duration, Instant};
 use scaledp_schema::msg::{CompressedImage, Image, JointState, PoseStamped};
 use scaledp_schema::RosMessage;
 
-use crate::episode::{convert, ConvertOptions};
+use crate::episode::convert;
 use crate::frames::InMemory;
 use crate::images::{encode_message, EncodeSpec, ImageView};
+use crate::options::ConvertOptions;
 use crate::source::{Recording, Serialization, TopicInfo};
 
 /// One input longer than this is a finding (a near-hang).

@@ -20,6 +20,7 @@
 //!
 //! Every error is an [`Error`] naming the file and what is wrong with it.
 
+mod actions;
 mod align;
 mod batch;
 mod decode;
@@ -36,12 +37,14 @@ pub mod frames;
 #[cfg(test)]
 mod fuzz;
 pub mod images;
+mod inputs;
 mod kinematics;
 mod lerobot;
 pub mod live;
 mod lz4;
 mod mcap_source;
 mod mcap_stream;
+mod options;
 mod prefetch;
 mod resample;
 pub mod ros1;
@@ -52,14 +55,14 @@ mod stats;
 mod urdf;
 
 pub use align::{align, Alignment, AlignmentReport, Stream, StreamReport};
-pub use batch::{
-    collect_inputs, content_hash, merge, read_input, run, shard, InputResult, JobOptions, Progress,
-};
-pub use episode::{convert, state_names, CameraFrames, ConvertOptions, Episode};
+pub use batch::{merge, run, InputResult, Progress};
+pub use episode::{convert, state_names, CameraFrames, Episode};
 pub use error::{Error, Result};
 pub use frames::{FrameKey, FrameStore, InMemory};
+pub use inputs::{collect_inputs, content_hash, read_input, shard};
 pub use lerobot::{EpisodeRecord, Sidecar};
 pub use mcap_source::read_mcap;
+pub use options::{ConvertOptions, JobOptions};
 pub use ros1::read_ros1_bag;
 pub use rosbag2::read_rosbag2;
 pub use source::{RawMessage, Recording, Serialization, TopicInfo};

@@ -86,8 +86,9 @@ pub fn encode_frame(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::episode::{convert, ConvertOptions};
+    use crate::episode::convert;
     use crate::frames::InMemory;
+    use crate::options::ConvertOptions;
     use crate::source::{RawMessage, Recording};
     use scaledp_schema::msg::{Header, Image, JointState, Time};
     use scaledp_schema::{Rig, RosMessage};

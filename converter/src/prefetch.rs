@@ -16,8 +16,8 @@ use std::path::Path;
 
 use crate::align::first_tick;
 use crate::encode_pool::FrameJob;
-use crate::episode::ConvertOptions;
 use crate::mcap_stream::{FrameBytes, Metadata, Payload};
+use crate::options::ConvertOptions;
 use crate::source::{Recording, TopicInfo};
 
 /// Frames held per camera while `start` is unknown (a stream that never starts).

@@ -9,10 +9,10 @@ use scaledp_schema::rig::Arm;
 
 use crate::align::Stream;
 use crate::decode;
-use crate::episode::ConvertOptions;
 use crate::error::{Error, Result};
 use crate::kinematics::ArmKinematics;
-use crate::source::RawMessage;
+use crate::options::ConvertOptions;
+use crate::source::{RawMessage, Recording};
 
 /// The capture time of a message: its header stamp, or its log time with `--log-time` or when
 /// the header holds none.
@@ -22,6 +22,18 @@ pub(crate) fn stamp_of(header_ns: u64, log_time_ns: u64, opts: &ConvertOptions) 
     } else {
         header_ns
     }
+}
+
+/// The messages of `topic` logged inside the options' window, in stored order.
+pub(crate) fn messages_of<'r>(
+    rec: &'r Recording,
+    topic: &str,
+    opts: &ConvertOptions,
+) -> Vec<&'r RawMessage> {
+    rec.messages
+        .iter()
+        .filter(|m| m.topic == topic && opts.in_window(m.log_time_ns))
+        .collect()
 }
 
 /// Longest hole between consecutive stamps of a topic (1 h): one longer is a clock jump, not a
