@@ -42,6 +42,10 @@ pub enum Error {
         /// Why.
         reason: String,
     },
+    /// Object storage failed (no such bucket, refused credentials, access denied, the network
+    /// after the retries); the message names the URL.
+    #[error(transparent)]
+    Store(#[from] scaledp_store::Error),
     /// The output dataset could not be written or read back.
     #[error("{}: {reason}", path.display())]
     Dataset {
@@ -67,6 +71,45 @@ impl Error {
             .split_whitespace()
             .collect::<Vec<_>>()
             .join(" ")
+    }
+    /// The same error about `to` instead of `from` (or a file under it): a downloaded copy's
+    /// errors name the object it came from.
+    pub(crate) fn renamed(self, from: &std::path::Path, to: &std::path::Path) -> Self {
+        let swap = |p: PathBuf| match p.strip_prefix(from) {
+            Ok(rel) if rel.as_os_str().is_empty() => to.to_path_buf(),
+            Ok(rel) => to.join(rel),
+            Err(_) => p,
+        };
+        match self {
+            Self::Io { path, source } => Self::Io {
+                path: swap(path),
+                source,
+            },
+            Self::Input { path, reason } => Self::Input {
+                path: swap(path),
+                reason,
+            },
+            Self::Message {
+                path,
+                topic,
+                log_time_ns,
+                reason,
+            } => Self::Message {
+                path: swap(path),
+                topic,
+                log_time_ns,
+                reason,
+            },
+            Self::Rejected { path, reason } => Self::Rejected {
+                path: swap(path),
+                reason,
+            },
+            Self::Dataset { path, reason } => Self::Dataset {
+                path: swap(path),
+                reason,
+            },
+            other => other,
+        }
     }
     /// A closure turning an I/O error on `path` into an [`Error::Io`].
     pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {

@@ -7,14 +7,15 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use rayon::prelude::*;
 
 use crate::encode_pool::{encode_while, Encodings, FrameJob};
 use crate::error::{Error, Result};
 use crate::images::{encode_message, EncodeSpec, EncodedFrame};
-use crate::mcap_stream::{stream, stream_hashed};
+use crate::mcap_remote::RemoteMcap;
+use crate::mcap_stream::{stream, stream_hashed, Payload};
 use crate::options::ConvertOptions;
 use crate::prefetch::Selector;
 use crate::source::{RawMessage, Recording, Serialization, TopicInfo};
@@ -107,10 +108,18 @@ impl FrameStore for InMemory<'_> {
     }
 }
 
+/// Where an MCAP recording is read from.
+pub(crate) enum McapSource {
+    /// A local file.
+    File(PathBuf),
+    /// An object, read by range (see [`crate::mcap_remote`]).
+    Object(Arc<RemoteMcap>),
+}
+
 /// An MCAP file's frame stamps, the frames encoded during the first read, and the file to read
 /// the others from.
 pub struct McapFrames {
-    path: PathBuf,
+    source: McapSource,
     stamps: BTreeMap<String, Vec<(u64, u64)>>,
     /// Per topic, the message types counted as its frames on the first read (wanted images):
     /// a second read counts the same messages, so ordinals agree.
@@ -188,7 +197,13 @@ impl FrameStore for McapFrames {
             .fetch_add(left, std::sync::atomic::Ordering::Relaxed);
         let mut ordinal: BTreeMap<String, usize> = BTreeMap::new();
         let (read, done) = encode_while(path, spec, |submit| {
-            stream(&self.path, &mut |topic, log_time_ns, payload, _| {
+            let path = match &self.source {
+                McapSource::File(path) => path,
+                McapSource::Object(remote) => {
+                    return self.read_remote_again(remote, &missing, left, submit);
+                }
+            };
+            stream(path, &mut |topic, log_time_ns, payload, _| {
                 let Some(set) = missing.get(&topic.topic).filter(|_| self.is_frame(topic)) else {
                     return Ok(true);
                 };
@@ -215,6 +230,56 @@ impl FrameStore for McapFrames {
     }
 }
 
+impl McapFrames {
+    /// The second read of an object: only the chunks holding the `missing` frames (`left` of
+    /// them), each frame found by its topic, log time and place among that topic's frames
+    /// logged at the same time (ordinals cannot be counted in a partial read).
+    fn read_remote_again(
+        &self,
+        remote: &RemoteMcap,
+        missing: &BTreeMap<String, BTreeSet<usize>>,
+        mut left: usize,
+        submit: &mut dyn FnMut(FrameJob),
+    ) -> Result<()> {
+        let mut by_log: HashMap<(String, u64, usize), usize> = HashMap::new();
+        let mut logs: BTreeMap<String, BTreeSet<u64>> = BTreeMap::new();
+        for (topic, set) in missing {
+            let mut seen: HashMap<u64, usize> = HashMap::new();
+            for (o, (_, log)) in self.stamps(topic).into_iter().enumerate() {
+                let occurrence = seen.entry(log).or_default();
+                if set.contains(&o) {
+                    by_log.insert((topic.clone(), log, *occurrence), o);
+                    logs.entry(topic.clone()).or_default().insert(log);
+                }
+                *occurrence += 1;
+            }
+        }
+        let mut occurrences: HashMap<(String, u64), usize> = HashMap::new();
+        remote.stream_again(&logs, &mut |topic, log_time_ns, payload, _| {
+            let wanted = logs
+                .get(&topic.topic)
+                .is_some_and(|l| l.contains(&log_time_ns));
+            if !wanted || !self.is_frame(topic) {
+                return Ok(true);
+            }
+            let k = occurrences
+                .entry((topic.topic.clone(), log_time_ns))
+                .or_default();
+            if let Some(&o) = by_log.get(&(topic.topic.clone(), log_time_ns, *k)) {
+                submit(FrameJob {
+                    key: (topic.topic.clone(), o),
+                    message_type: topic.message_type.clone(),
+                    log_time_ns,
+                    bytes: payload.share(),
+                });
+                left = left.saturating_sub(1);
+            }
+            *k += 1;
+            Ok(left > 0)
+        })
+    }
+}
+
 /// Reads an MCAP file once: every wanted non-image message in full, the first message of each
 /// image topic in full (for rig detection), and the stamps of all image messages. With
 /// `prefetch`, the frames a conversion with those options will pick are encoded on the way.
@@ -233,6 +298,18 @@ pub(crate) fn read_mcap_hashed(
     prefetch: Option<&ConvertOptions>,
     hasher: Option<&mut blake3::Hasher>,
 ) -> Result<(Recording, McapFrames)> {
+    let source = McapSource::File(path.into());
+    read_mcap_from(path, source, want, prefetch, hasher)
+}
+
+/// [`read_mcap_hashed`] of a recording in a local file or in object storage (named `path`).
+pub(crate) fn read_mcap_from(
+    path: &Path,
+    source: McapSource,
+    want: &(dyn Fn(&TopicInfo) -> bool + Sync),
+    prefetch: Option<&ConvertOptions>,
+    hasher: Option<&mut blake3::Hasher>,
+) -> Result<(Recording, McapFrames)> {
     let spec = prefetch.map(|o| EncodeSpec {
         width: o.width,
         height: o.height,
@@ -243,7 +320,7 @@ pub(crate) fn read_mcap_hashed(
     let mut stamps: BTreeMap<String, Vec<(u64, u64)>> = BTreeMap::new();
     let mut frame_types: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     let read = |submit: &mut dyn FnMut(FrameJob)| {
-        let r = stream_hashed(path, hasher, &mut |t, log_time_ns, payload, metadata| {
+        let mut on_message = |t: &TopicInfo, log_time_ns, payload: Payload<'_>, metadata: &_| {
             if !want(t) {
                 return Ok(true);
             }
@@ -293,7 +370,11 @@ pub(crate) fn read_mcap_hashed(
                 );
             }
             Ok(true)
-        });
+        };
+        let r = match &source {
+            McapSource::File(file) => stream_hashed(file, hasher, &mut on_message),
+            McapSource::Object(remote) => remote.stream(hasher, &mut on_message),
+        };
         if let (Ok(_), Some(s)) = (&r, &mut selector) {
             s.finish(submit);
         }
@@ -313,7 +394,7 @@ pub(crate) fn read_mcap_hashed(
             metadata,
         },
         McapFrames {
-            path: path.into(),
+            source,
             stamps,
             frame_types,
             ready: Mutex::new(ready),

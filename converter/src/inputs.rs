@@ -54,7 +54,7 @@ pub fn collect_inputs(paths: &[PathBuf]) -> Result<Vec<PathBuf>> {
 }
 
 /// The inputs of shard `i` of `n`: a contiguous slice of the sorted list.
-pub fn shard(inputs: &[PathBuf], i: usize, n: usize) -> &[PathBuf] {
+pub fn shard<T>(inputs: &[T], i: usize, n: usize) -> &[T] {
     let len = inputs.len();
     &inputs[len * i / n..len * (i + 1) / n]
 }

@@ -15,13 +15,11 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, Read};
 use std::ops::Range;
 use std::path::Path;
 use std::sync::Arc;
 
 use mcap::records::{op, Record};
-use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
 use crate::error::{Error, Result};
 use crate::lz4::{crc_mismatch, Decoder, Tail};
@@ -390,42 +388,6 @@ pub fn stream(path: &Path, on_message: &mut OnMessage<'_>) -> Result<(Vec<TopicI
     stream_hashed(path, None, on_message)
 }
 
-/// Refuses a file that does not start with the MCAP magic (empty, or another format named
-/// `.mcap`), then rewinds it.
-fn check_magic(path: &Path, file: &mut File, len: u64) -> Result<()> {
-    use std::io::{Seek, SeekFrom};
-    let mut magic = [0u8; 8];
-    let n = len.min(8) as usize;
-    file.read_exact(&mut magic[..n]).map_err(Error::io(path))?;
-    file.seek(SeekFrom::Start(0)).map_err(Error::io(path))?;
-    if magic[..n] != mcap::MAGIC[..n] {
-        return Err(Error::input(path, "not an MCAP file (no MCAP magic)"));
-    }
-    if n < 8 {
-        return Err(Error::input(
-            path,
-            format!("not an MCAP file: {len} bytes, shorter than the magic"),
-        ));
-    }
-    Ok(())
-}
-
-/// A file read that also feeds a hasher.
-struct Hashing<'h> {
-    file: File,
-    hasher: Option<&'h mut blake3::Hasher>,
-}
-
-impl Read for Hashing<'_> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.file.read(buf)?;
-        if let Some(h) = &mut self.hasher {
-            h.update(&buf[..n]);
-        }
-        Ok(n)
-    }
-}
-
 /// [`stream`], feeding every byte of the file to `hasher` on the way (for a content hash
 /// without a second read of the file).
 pub fn stream_hashed(
@@ -433,57 +395,16 @@ pub fn stream_hashed(
     hasher: Option<&mut blake3::Hasher>,
     on_message: &mut OnMessage<'_>,
 ) -> Result<(Vec<TopicInfo>, Metadata)> {
-    let mut file = File::open(path).map_err(Error::io(path))?;
+    let file = File::open(path).map_err(Error::io(path))?;
     let len = file.metadata().map_err(Error::io(path))?.len();
-    check_magic(path, &mut file, len)?;
-    let hashing = hasher.is_some();
-    let mut src = BufReader::with_capacity(1 << 20, Hashing { file, hasher });
-    // No record is longer than the file, nor than the largest chunk we accept compressed (LZ4
-    // and zstd grow incompressible data by well under 1/64): a corrupt length is refused before
-    // anything is allocated for it.
-    let limit = usize::try_from(len)
-        .unwrap_or(usize::MAX)
-        .min(MAX_CHUNK + MAX_CHUNK / 64);
-    let mut linear = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_emit_chunks(true)
-            .with_record_length_limit(limit),
-    );
-    let mut reader = Reader {
-        path,
-        schemas: BTreeMap::new(),
-        channels: BTreeMap::new(),
-        metadata: Metadata::new(),
-        first: true,
-        buffers: Buffers::default(),
-    };
-    while let Some(event) = linear.next_event() {
-        match event.map_err(|e| {
-            Error::input(
-                path,
-                format!("truncated or corrupt MCAP ({e}); try `scaledp recover`"),
-            )
-        })? {
-            LinearReadEvent::ReadRequest(n) => {
-                let got = src.read(linear.insert(n)).map_err(Error::io(path))?;
-                linear.notify_read(got);
-            }
-            LinearReadEvent::Record { data, opcode } => {
-                if !reader.record(opcode, data, None, on_message)? {
-                    return Ok((Vec::new(), reader.metadata));
-                }
-            }
-        }
-    }
-    if hashing {
-        // Whatever follows the end magic counts too.
-        std::io::copy(&mut src, &mut std::io::sink()).map_err(Error::io(path))?;
-    }
-    let mut topics: Vec<TopicInfo> = reader.channels.into_values().collect();
-    topics.sort_by(|a, b| a.topic.cmp(&b.topic));
-    topics.dedup_by(|a, b| a.topic == b.topic);
-    Ok((topics, reader.metadata))
+    stream_from(path, file, len, hasher, on_message)
 }
+
+mod indexed;
+mod source;
+
+pub(crate) use indexed::stream_chunks;
+pub(crate) use source::stream_from;
 
 #[cfg(test)]
 mod tests;

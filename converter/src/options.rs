@@ -180,6 +180,7 @@ pub struct JobOptions {
     pub(crate) file_size_mib: u64,
     pub(crate) include_failures: bool,
     pub(crate) split_gap_s: Option<f64>,
+    pub(crate) work_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for JobOptions {
@@ -192,6 +193,7 @@ impl Default for JobOptions {
             file_size_mib: 100,
             include_failures: false,
             split_gap_s: None,
+            work_dir: None,
         }
     }
 }
@@ -233,5 +235,16 @@ impl JobOptions {
     pub fn split_gap(mut self, seconds: f64) -> Self {
         self.split_gap_s = Some(seconds);
         self
+    }
+    /// Where inputs from object storage that are read whole (bags, `.db3`, rosbag2
+    /// directories) are downloaded, and where the working copy of a dataset written to object
+    /// storage lives (default: the system's temporary directory).
+    pub fn work_dir(mut self, dir: impl Into<std::path::PathBuf>) -> Self {
+        self.work_dir = Some(dir.into());
+        self
+    }
+    /// The work directory in use.
+    pub(crate) fn work_dir_or_temp(&self) -> std::path::PathBuf {
+        self.work_dir.clone().unwrap_or_else(std::env::temp_dir)
     }
 }

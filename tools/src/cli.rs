@@ -265,21 +265,27 @@ pub struct RecordArgs {
 /// `scaledp recover`.
 #[derive(Debug, Args)]
 pub struct RecoverArgs {
-    /// The damaged file (e.g. episode_000003.mcap.partial).
+    /// The damaged file (e.g. episode_000003.mcap.partial), or an object (s3://bucket/key).
     pub input: PathBuf,
-    /// Output (default: the name without .partial, or <stem>.recovered.mcap).
+    /// Output (default: the name without .partial, or <stem>.recovered.mcap), a path or URL.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Where an object is downloaded and recovered before the result is uploaded (default: the
+    /// system's temporary directory).
+    #[arg(long, value_name = "DIR")]
+    pub work_dir: Option<PathBuf>,
 }
 
 /// `scaledp convert`.
 #[derive(Debug, Args)]
 pub struct ConvertArgs {
     /// MCAP files, ROS 1 .bag files, rosbag2 directories or .db3 files, or directories holding
-    /// them (searched recursively; *.partial files and discarded/ directories are skipped).
+    /// them (searched recursively; *.partial files and discarded/ directories are skipped);
+    /// s3://bucket/prefix/ lists a prefix the same way.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
-    /// The dataset directory (created, or extended: inputs already in it are skipped).
+    /// The dataset directory or s3://bucket/prefix (created, or extended: inputs already in it
+    /// are skipped).
     #[arg(long)]
     pub out: PathBuf,
     /// Rig file or shipped rig name mapping topics to cameras and arms (default: the rig stored
@@ -335,6 +341,11 @@ pub struct ConvertArgs {
     /// bags holding many demonstrations).
     #[arg(long, value_name = "SECONDS")]
     pub split_gap: Option<f64>,
+    /// Where bags and rosbag2 directories from object storage are downloaded, and where the
+    /// working copy of a dataset written to object storage lives (default: the system's
+    /// temporary directory).
+    #[arg(long, value_name = "DIR")]
+    pub work_dir: Option<PathBuf>,
 }
 
 fn parse_pair(s: &str) -> Result<(String, String), String> {
@@ -373,17 +384,28 @@ fn parse_shard(s: &str) -> Result<(usize, usize), String> {
 #[derive(Debug, Subcommand)]
 pub enum DatasetCommand {
     /// Join datasets (e.g. the shards of one batch), re-indexing episodes and re-aggregating stats.
-    Merge {
-        /// Datasets, in order.
-        #[arg(required = true)]
-        inputs: Vec<PathBuf>,
-        /// The merged dataset (replaced if it exists).
-        #[arg(long)]
-        out: PathBuf,
-        /// Target size of each data file (MiB).
-        #[arg(long, alias = "file-size-mb", default_value_t = 100)]
-        file_size_mib: u64,
-    },
+    Merge(MergeArgs),
+}
+
+/// `scaledp dataset merge`.
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// Datasets (directories or s3://bucket/prefix), in order.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// The merged dataset, a directory or s3://bucket/prefix (replaced if it exists).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Target size of each data file (MiB).
+    #[arg(long, alias = "file-size-mb", default_value_t = 100)]
+    pub file_size_mib: u64,
+    /// Skip inputs that hold nothing at all (a shard that had no inputs) instead of failing.
+    #[arg(long)]
+    pub skip_empty: bool,
+    /// Where data files of datasets in object storage are downloaded, and where the working
+    /// copy of a merged dataset written to object storage lives.
+    #[arg(long, value_name = "DIR")]
+    pub work_dir: Option<PathBuf>,
 }
 
 /// `scaledp demo`.

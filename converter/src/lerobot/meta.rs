@@ -33,6 +33,10 @@ pub struct EpisodeRecord {
     pub source: String,
     /// BLAKE3 of the input's bytes.
     pub source_hash: String,
+    /// For an input read from object storage, its version (file names, sizes and ETags) when
+    /// it was read: a re-run skips that version without reading it again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source_etag: Option<String>,
     /// Per-feature statistics.
     pub stats: BTreeMap<String, Stats>,
     /// Alignment measurements.

@@ -9,19 +9,28 @@
 
 mod columns;
 mod meta;
+mod repair;
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use arrow_array::{ArrayRef, RecordBatch};
-use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
 pub use meta::{data_path, EpisodeRecord, Sidecar};
+use repair::read_row_group;
 
 use crate::episode::Episode;
 use crate::error::{Error, Result};
 use crate::stats::Stats;
+
+/// Where an episode came from, as its record keeps it.
+struct Provenance {
+    source: String,
+    source_hash: String,
+    source_etag: Option<String>,
+    report: crate::align::AlignmentReport,
+    time_source: String,
+}
 
 /// The open data file and the episodes (row groups) it holds.
 struct Tail {
@@ -42,46 +51,6 @@ fn derr(path: &Path, e: impl std::fmt::Display) -> Error {
         path: path.into(),
         reason: e.to_string(),
     }
-}
-
-/// Reads row group `group` of a data file.
-fn read_row_group(path: &Path, group: usize) -> Result<RecordBatch> {
-    let file = File::open(path).map_err(Error::io(path))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| derr(path, e))?
-        .with_row_groups(vec![group])
-        .with_batch_size(1 << 20)
-        .build()
-        .map_err(|e| derr(path, e))?;
-    let batches: Vec<RecordBatch> = reader
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| derr(path, e))?;
-    let schema = batches
-        .first()
-        .map(RecordBatch::schema)
-        .ok_or_else(|| derr(path, format!("row group {group} is empty")))?;
-    arrow_select_concat(&schema, &batches).map_err(|e| derr(path, e))
-}
-
-fn arrow_select_concat(
-    schema: &arrow_schema::SchemaRef,
-    batches: &[RecordBatch],
-) -> std::result::Result<RecordBatch, String> {
-    if batches.len() == 1 {
-        return Ok(batches[0].clone());
-    }
-    Err(format!(
-        "row group read as {} batches for {} columns; expected one",
-        batches.len(),
-        schema.fields().len()
-    ))
-}
-
-fn num_rows(path: &Path) -> Result<(u64, usize)> {
-    let file = File::open(path).map_err(Error::io(path))?;
-    let b = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| derr(path, e))?;
-    let md = b.metadata();
-    Ok((md.file_metadata().num_rows() as u64, md.num_row_groups()))
 }
 
 impl Dataset {
@@ -122,6 +91,44 @@ impl Dataset {
         Ok(ds)
     }
 
+    /// A dataset at the local `root` whose committed episodes are `sidecar`'s, their data
+    /// files elsewhere (in object storage): nothing is checked or repaired, and new episodes go
+    /// to new data files.
+    pub fn continue_from(root: &Path, sidecar: Option<Sidecar>, file_size_mb: u64) -> Result<Self> {
+        std::fs::create_dir_all(root).map_err(Error::io(root))?;
+        Ok(Self {
+            root: root.into(),
+            sidecar,
+            tail: None,
+            file_size_mb,
+        })
+    }
+
+    /// The record of the dataset (None before the first episode).
+    pub fn sidecar(&self) -> Option<&Sidecar> {
+        self.sidecar.as_ref()
+    }
+
+    /// The data file still open for more episodes (the others are complete).
+    pub fn open_file(&self) -> Option<u64> {
+        self.tail.as_ref().map(|t| t.file)
+    }
+
+    /// The dataset's root.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Writes every meta file from the record (as each commit does).
+    pub fn write_meta(&self) -> Result<()> {
+        if let Some(s) = &self.sidecar {
+            let mut staged = columns::Staged::default();
+            meta::stage_all(&self.root, s, self.file_size_mb, &mut staged)?;
+            staged.commit()?;
+        }
+        Ok(())
+    }
+
     /// Committed episodes.
     pub fn episodes(&self) -> &[EpisodeRecord] {
         self.sidecar.as_ref().map_or(&[], |s| &s.episodes)
@@ -130,77 +137,6 @@ impl Dataset {
     /// True when an input with this BLAKE3 hash is already in the dataset.
     pub fn contains(&self, source_hash: &str) -> bool {
         self.episodes().iter().any(|e| e.source_hash == source_hash)
-    }
-
-    /// Removes temporary files, files no episode lists, and rows the record does not list.
-    fn repair(&mut self) -> Result<()> {
-        let mut listed: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
-        for e in self.episodes() {
-            listed.entry(e.data_file).or_default().push(e.length);
-        }
-        let data = self.root.join("data");
-        if data.exists() {
-            for chunk in std::fs::read_dir(&data)
-                .map_err(Error::io(&data))?
-                .flatten()
-            {
-                for f in std::fs::read_dir(chunk.path())
-                    .map_err(Error::io(chunk.path()))?
-                    .flatten()
-                {
-                    let p = f.path();
-                    let known = listed.keys().any(|&n| data_path(&self.root, n) == p);
-                    if !known {
-                        tracing::warn!(
-                            "{}: not part of the dataset (left by a killed job); removed",
-                            p.display()
-                        );
-                        std::fs::remove_file(&p).map_err(Error::io(&p))?;
-                    }
-                }
-            }
-        }
-        for (&file, lengths) in &listed {
-            let path = data_path(&self.root, file);
-            let (rows, groups) = num_rows(&path)?;
-            let want: u64 = lengths.iter().sum();
-            if rows == want && groups == lengths.len() {
-                continue;
-            }
-            if groups < lengths.len() {
-                return Err(derr(
-                    &path,
-                    format!(
-                        "holds {groups} episodes but the record lists {}",
-                        lengths.len()
-                    ),
-                ));
-            }
-            tracing::warn!(
-                "{}: dropping rows of an episode that was never committed",
-                path.display()
-            );
-            let keep: Vec<RecordBatch> = (0..lengths.len())
-                .map(|g| read_row_group(&path, g))
-                .collect::<Result<_>>()?;
-            columns::write_parquet(&path, &keep)?;
-        }
-        if let Some(s) = &self.sidecar {
-            let mut staged = columns::Staged::default();
-            meta::stage_all(&self.root, s, self.file_size_mb, &mut staged)?;
-            staged.commit()?;
-        }
-        for dir in [
-            self.root.join("meta"),
-            self.root.join("meta/episodes/chunk-000"),
-        ] {
-            for f in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-                if f.path().extension().is_some_and(|e| e == "tmp") {
-                    let _ = std::fs::remove_file(f.path());
-                }
-            }
-        }
-        Ok(())
     }
 
     fn check_layout(&self, ep: &Episode) -> Result<()> {
@@ -281,8 +217,14 @@ impl Dataset {
         }
     }
 
-    /// Appends a converted episode and commits it.
-    pub fn add(&mut self, ep: &Episode, source_hash: &str) -> Result<EpisodeRecord> {
+    /// Appends a converted episode and commits it: `source_hash` is its input's content hash,
+    /// `source_etag` the object version it was read from, if it came from object storage.
+    pub fn add(
+        &mut self,
+        ep: &Episode,
+        source_hash: &str,
+        source_etag: Option<String>,
+    ) -> Result<EpisodeRecord> {
         Self::check_shapes(ep)?;
         self.check_layout(ep)?;
         if self.sidecar.is_none() {
@@ -346,17 +288,14 @@ impl Dataset {
                 Stats::of_image(&c.histogram),
             );
         }
-        let source = ep.source.display().to_string();
-        self.commit(
-            cols,
-            n,
-            &ep.task,
-            stats,
-            source,
-            source_hash.into(),
-            ep.report.clone(),
-            ep.time_source.clone(),
-        )
+        let provenance = Provenance {
+            source: ep.source.display().to_string(),
+            source_hash: source_hash.into(),
+            source_etag,
+            report: ep.report.clone(),
+            time_source: ep.time_source.clone(),
+        };
+        self.commit(cols, n, &ep.task, stats, provenance)
     }
 
     /// Appends one episode of another scaledp dataset (for `merge`), re-indexed.
@@ -408,29 +347,23 @@ impl Dataset {
         }
         let task = &o.tasks[rec.task_index as usize];
         let frames = batch.num_rows();
-        self.commit(
-            cols,
-            frames,
-            task,
-            stats,
-            rec.source.clone(),
-            rec.source_hash.clone(),
-            rec.report.clone(),
-            rec.time_source.clone(),
-        )
+        let provenance = Provenance {
+            source: rec.source.clone(),
+            source_hash: rec.source_hash.clone(),
+            source_etag: rec.source_etag.clone(),
+            report: rec.report.clone(),
+            time_source: rec.time_source.clone(),
+        };
+        self.commit(cols, frames, task, stats, provenance)
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn commit(
         &mut self,
         mut cols: Vec<(String, ArrayRef)>,
         n: usize,
         task: &str,
         mut stats: BTreeMap<String, Stats>,
-        source: String,
-        source_hash: String,
-        report: crate::align::AlignmentReport,
-        time_source: String,
+        provenance: Provenance,
     ) -> Result<EpisodeRecord> {
         let s = self
             .sidecar
@@ -494,11 +427,12 @@ impl Dataset {
             data_file: tail.file,
             from_index: from,
             to_index: to,
-            source,
-            source_hash,
+            source: provenance.source,
+            source_hash: provenance.source_hash,
+            source_etag: provenance.source_etag,
             stats,
-            report,
-            time_source,
+            report: provenance.report,
+            time_source: provenance.time_source,
         };
         if size >= self.file_size_mb << 20 {
             self.tail = None;

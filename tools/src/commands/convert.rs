@@ -1,4 +1,4 @@
-//! `scaledp convert` and `scaledp dataset merge`.
+//! `scaledp convert` and `scaledp dataset merge`, local or on object storage.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -6,14 +6,27 @@ use std::time::Instant;
 
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
-use scaledp_converter::{ConvertOptions, InputResult, JobOptions, Progress};
+use scaledp_converter::{
+    ConvertOptions, InputResult, JobOptions, Location, MergeOptions, Progress,
+};
 use scaledp_schema::Rig;
 
-use crate::cli::{ConvertArgs, ExitStatus};
+use crate::cli::{ConvertArgs, ExitStatus, MergeArgs};
+
+/// A command-line path or `s3://` URL.
+pub(crate) fn location(arg: &Path) -> Result<Location> {
+    Ok(Location::parse(arg.as_os_str())?)
+}
 
 pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
     let rig = args.rig.as_deref().map(Rig::load_or_builtin).transpose()?;
-    let inputs = scaledp_converter::collect_inputs(&args.inputs)?;
+    let locations = args
+        .inputs
+        .iter()
+        .map(|p| location(p))
+        .collect::<Result<Vec<_>>>()?;
+    let out = location(&args.out)?;
+    let inputs = scaledp_converter::collect(&locations)?;
     if inputs.is_empty() {
         anyhow::bail!(
             "no .mcap, .bag, .db3 or rosbag2 directory found in {:?}",
@@ -53,6 +66,9 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
     if let Some(gap) = args.split_gap {
         opts = opts.split_gap(gap);
     }
+    if let Some(dir) = args.work_dir {
+        opts = opts.work_dir(dir);
+    }
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template(
             "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes {msg}",
@@ -61,7 +77,7 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
     );
     let frames = AtomicU64::new(0);
     let start = Instant::now();
-    let results = scaledp_converter::run(&inputs, &args.out, &opts, &|p| match p {
+    let results = scaledp_converter::run_inputs(&inputs, &out, &opts, &|p| match p {
         Progress::Total(n) => bar.set_length(n as u64),
         Progress::Done {
             result, frames: f, ..
@@ -78,10 +94,14 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
         }
     })?;
     bar.finish_and_clear();
-    summarize(&results, &args.out, start.elapsed().as_secs_f64())
+    summarize(&results, &out, start.elapsed().as_secs_f64())
 }
 
-fn summarize(results: &[(PathBuf, InputResult)], out: &Path, seconds: f64) -> Result<ExitStatus> {
+fn summarize(
+    results: &[(PathBuf, InputResult)],
+    out: &Location,
+    seconds: f64,
+) -> Result<ExitStatus> {
     let (mut converted, mut frames, mut skipped, mut failed) = (0, 0, 0, Vec::new());
     for (path, o) in results {
         match o {
@@ -112,7 +132,7 @@ fn summarize(results: &[(PathBuf, InputResult)], out: &Path, seconds: f64) -> Re
         "{converted} converted ({frames} frames, {:.0} frames/s), {skipped} skipped, {} failed → {}",
         frames as f64 / seconds.max(1e-9),
         failed.len(),
-        out.display()
+        out
     );
     for line in &failed {
         println!("failed: {line}");
@@ -124,12 +144,27 @@ fn summarize(results: &[(PathBuf, InputResult)], out: &Path, seconds: f64) -> Re
     })
 }
 
-pub fn merge(inputs: &[PathBuf], out: &Path, file_size_mib: u64) -> Result<ExitStatus> {
-    let n = scaledp_converter::merge(inputs, out, file_size_mib)?;
+pub fn merge(args: MergeArgs) -> Result<ExitStatus> {
+    let inputs = args
+        .inputs
+        .iter()
+        .map(|p| location(p))
+        .collect::<Result<Vec<_>>>()?;
+    let out = location(&args.out)?;
+    let mut opts = MergeOptions::default()
+        .file_size_mib(args.file_size_mib)
+        .skip_empty(args.skip_empty);
+    if let Some(dir) = args.work_dir {
+        opts = opts.work_dir(dir);
+    }
+    let summary = scaledp_converter::merge_datasets(&inputs, &out, &opts)?;
+    for empty in &summary.empty {
+        eprintln!("skipped {empty}: holds nothing (a shard without inputs?)");
+    }
     println!(
-        "{n} episodes from {} datasets → {}",
-        inputs.len(),
-        out.display()
+        "{} episodes from {} datasets → {out}",
+        summary.episodes,
+        inputs.len() - summary.empty.len(),
     );
     Ok(ExitStatus::Success)
 }

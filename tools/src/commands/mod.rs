@@ -24,11 +24,7 @@ pub fn dispatch(command: Command) -> Result<ExitStatus> {
         Command::Record(args) => record::run(args),
         Command::Recover(args) => recover::run(args),
         Command::Convert(args) => convert::run(args),
-        Command::Dataset(crate::cli::DatasetCommand::Merge {
-            inputs,
-            out,
-            file_size_mib,
-        }) => convert::merge(&inputs, &out, file_size_mib),
+        Command::Dataset(crate::cli::DatasetCommand::Merge(args)) => convert::merge(args),
         Command::Bench(cmd) => scaledp_bench::run(cmd).map(ExitStatus::from),
         Command::Train(args) => train::run(args),
         Command::Predict(args) => predict::run(args),

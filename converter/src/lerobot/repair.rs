@@ -1,0 +1,127 @@
+//! Reading a dataset back: a row group of a data file (for `merge`), and the repair `open`
+//! runs, which removes what a killed job may have left (files no episode lists, rows of an
+//! episode that was never committed, temporary files).
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::path::Path;
+
+use arrow_array::RecordBatch;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+
+use super::meta::{self, data_path};
+use super::{columns, derr, Dataset};
+use crate::error::{Error, Result};
+
+/// Reads row group `group` of a data file.
+pub(super) fn read_row_group(path: &Path, group: usize) -> Result<RecordBatch> {
+    let file = File::open(path).map_err(Error::io(path))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| derr(path, e))?
+        .with_row_groups(vec![group])
+        .with_batch_size(1 << 20)
+        .build()
+        .map_err(|e| derr(path, e))?;
+    let batches: Vec<RecordBatch> = reader
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| derr(path, e))?;
+    let schema = batches
+        .first()
+        .map(RecordBatch::schema)
+        .ok_or_else(|| derr(path, format!("row group {group} is empty")))?;
+    arrow_select_concat(&schema, &batches).map_err(|e| derr(path, e))
+}
+
+fn arrow_select_concat(
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
+) -> std::result::Result<RecordBatch, String> {
+    if batches.len() == 1 {
+        return Ok(batches[0].clone());
+    }
+    Err(format!(
+        "row group read as {} batches for {} columns; expected one",
+        batches.len(),
+        schema.fields().len()
+    ))
+}
+
+fn num_rows(path: &Path) -> Result<(u64, usize)> {
+    let file = File::open(path).map_err(Error::io(path))?;
+    let b = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| derr(path, e))?;
+    let md = b.metadata();
+    Ok((md.file_metadata().num_rows() as u64, md.num_row_groups()))
+}
+
+impl Dataset {
+    /// Removes temporary files, files no episode lists, and rows the record does not list.
+    pub(super) fn repair(&mut self) -> Result<()> {
+        let mut listed: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
+        for e in self.episodes() {
+            listed.entry(e.data_file).or_default().push(e.length);
+        }
+        let data = self.root.join("data");
+        if data.exists() {
+            for chunk in std::fs::read_dir(&data)
+                .map_err(Error::io(&data))?
+                .flatten()
+            {
+                for f in std::fs::read_dir(chunk.path())
+                    .map_err(Error::io(chunk.path()))?
+                    .flatten()
+                {
+                    let p = f.path();
+                    let known = listed.keys().any(|&n| data_path(&self.root, n) == p);
+                    if !known {
+                        tracing::warn!(
+                            "{}: not part of the dataset (left by a killed job); removed",
+                            p.display()
+                        );
+                        std::fs::remove_file(&p).map_err(Error::io(&p))?;
+                    }
+                }
+            }
+        }
+        for (&file, lengths) in &listed {
+            let path = data_path(&self.root, file);
+            let (rows, groups) = num_rows(&path)?;
+            let want: u64 = lengths.iter().sum();
+            if rows == want && groups == lengths.len() {
+                continue;
+            }
+            if groups < lengths.len() {
+                return Err(derr(
+                    &path,
+                    format!(
+                        "holds {groups} episodes but the record lists {}",
+                        lengths.len()
+                    ),
+                ));
+            }
+            tracing::warn!(
+                "{}: dropping rows of an episode that was never committed",
+                path.display()
+            );
+            let keep: Vec<RecordBatch> = (0..lengths.len())
+                .map(|g| read_row_group(&path, g))
+                .collect::<Result<_>>()?;
+            columns::write_parquet(&path, &keep)?;
+        }
+        if let Some(s) = &self.sidecar {
+            let mut staged = columns::Staged::default();
+            meta::stage_all(&self.root, s, self.file_size_mb, &mut staged)?;
+            staged.commit()?;
+        }
+        for dir in [
+            self.root.join("meta"),
+            self.root.join("meta/episodes/chunk-000"),
+        ] {
+            for f in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+                if f.path().extension().is_some_and(|e| e == "tmp") {
+                    let _ = std::fs::remove_file(f.path());
+                }
+            }
+        }
+        Ok(())
+    }
+}
