@@ -7,6 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+pub mod s3;
+
 pub use scaledp_testkit::{
     free_endpoint, make_bags, python, run_python, workspace_root as workspace,
 };
