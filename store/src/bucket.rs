@@ -18,7 +18,7 @@ use object_store::path::Path as Key;
 use object_store::{GetOptions, GetRange, ObjectStore, PutPayload};
 
 use crate::config::S3Settings;
-use crate::error::{chain, s3_code, Error, Result};
+use crate::error::{chain, s3_code, s3_message, Error, Result};
 use crate::location::ObjectUrl;
 
 /// Size of each part of a multipart upload (S3 wants at least 5 MiB but for the last part); a
@@ -88,35 +88,23 @@ impl Describe {
             "TokenRefreshRequired",
             "AuthorizationHeaderMalformed",
         ];
-        match e {
-            object_store::Error::NotFound { .. } if code.as_deref() == Some("NoSuchBucket") => {
-                Error::NoSuchBucket {
-                    url: url_text,
-                    bucket: self.name.clone(),
-                    endpoint: self.endpoint.clone(),
-                }
+        // List requests come back as generic errors whatever the status: the S3 code decides
+        // first, then the kind object_store gave.
+        let kind = match (&e, code.as_deref()) {
+            (_, Some("NoSuchBucket")) => "bucket",
+            (_, Some("NoSuchKey" | "NotFound")) | (object_store::Error::NotFound { .. }, None) => {
+                "object"
             }
-            object_store::Error::NotFound { .. } => Error::NotFound { url: url_text },
-            object_store::Error::PermissionDenied { .. }
-            | object_store::Error::Unauthenticated { .. } => {
-                let code = code.unwrap_or_else(|| "HTTP 403".into());
-                if credential_codes.contains(&code.as_str()) {
-                    Error::Credentials {
-                        url: url_text,
-                        code,
-                        source_of_credentials: self.credentials_from.clone(),
-                    }
-                } else {
-                    Error::Denied {
-                        url: url_text,
-                        action,
-                        code,
-                        source_of_credentials: self.credentials_from.clone(),
-                    }
-                }
-            }
-            _ if code.is_none()
-                && [
+            (_, Some(c)) if credential_codes.contains(&c) => "credentials",
+            (_, Some("AccessDenied" | "AllAccessDisabled" | "AccountProblem")) => "denied",
+            (
+                object_store::Error::PermissionDenied { .. }
+                | object_store::Error::Unauthenticated { .. },
+                _,
+            ) => "denied",
+            (object_store::Error::NotFound { .. }, Some(_)) => "object",
+            (_, None)
+                if [
                     "error sending request",
                     "connect",
                     "timed out",
@@ -127,17 +115,39 @@ impl Describe {
                 .iter()
                 .any(|w| text.contains(w)) =>
             {
-                Error::Network {
-                    url: url_text,
-                    reason: format!(
-                        "network error talking to {} (gave up after the retries): {text}",
-                        self.endpoint
-                    ),
-                }
+                "network"
             }
+            _ => "other",
+        };
+        let code = code.unwrap_or_else(|| "HTTP 403".into());
+        match kind {
+            "bucket" => Error::NoSuchBucket {
+                url: url_text,
+                bucket: self.name.clone(),
+                endpoint: self.endpoint.clone(),
+            },
+            "object" => Error::NotFound { url: url_text },
+            "credentials" => Error::Credentials {
+                url: url_text,
+                code,
+                source_of_credentials: self.credentials_from.clone(),
+            },
+            "denied" => Error::Denied {
+                url: url_text,
+                action,
+                code,
+                source_of_credentials: self.credentials_from.clone(),
+            },
+            "network" => Error::Network {
+                url: url_text,
+                reason: format!(
+                    "network error talking to {} (gave up after the retries): {text}",
+                    self.endpoint
+                ),
+            },
             _ => Error::Other {
                 url: url_text,
-                reason: text,
+                reason: s3_message(&text).unwrap_or(text),
             },
         }
     }

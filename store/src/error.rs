@@ -154,6 +154,14 @@ pub(crate) fn s3_code(text: &str) -> Option<String> {
     Some(text[start..end].trim().to_string())
 }
 
+/// `<Code>: <Message>` of an S3 error body, if the text holds both.
+pub(crate) fn s3_message(text: &str) -> Option<String> {
+    let code = s3_code(text)?;
+    let start = text.find("<Message>")? + "<Message>".len();
+    let end = text[start..].find("</Message>")? + start;
+    Some(format!("{code}: {}", text[start..end].trim()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -164,6 +172,10 @@ mod tests {
                     <Message>The specified bucket does not exist</Message></Error>";
         assert_eq!(s3_code(body).as_deref(), Some("NoSuchBucket"));
         assert_eq!(s3_code("connection refused"), None);
+        assert_eq!(
+            s3_message(body).as_deref(),
+            Some("NoSuchBucket: The specified bucket does not exist")
+        );
     }
 
     #[test]

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Called with each request line (e.g. `GET /bucket/key HTTP/1.1`) before it is forwarded.
-pub type Hook = Box<dyn Fn(&str) + Send + Sync>;
+pub type Hook = Arc<dyn Fn(&str) + Send + Sync>;
 
 /// What the proxy sees and does, shared with its threads.
 #[derive(Default)]
@@ -118,7 +118,8 @@ fn requests(client: TcpStream, mut server: TcpStream, state: &ProxyState) {
         if state.down.load(Ordering::SeqCst) {
             return close(&client, &server);
         }
-        if let Some(hook) = &*state.hook.lock().unwrap_or_else(|p| p.into_inner()) {
+        let hook = state.hook.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        if let Some(hook) = hook {
             hook(&request_line);
         }
         state
