@@ -67,7 +67,12 @@ impl S3Env {
     /// `scaledp` with the AWS variables of `endpoint` and the writer's key (nothing else of
     /// the caller's AWS environment), retrying twice within 10 s so that failures are quick.
     pub fn scaledp(&self, endpoint: &str) -> Command {
-        let mut c = Command::new(scaledp_bin());
+        self.command(&scaledp_bin(), endpoint)
+    }
+
+    /// `program` with the environment of [`Self::scaledp`] (a script that runs scaledp).
+    pub fn command(&self, program: &Path, endpoint: &str) -> Command {
+        let mut c = Command::new(program);
         for (k, _) in std::env::vars_os() {
             if k.to_string_lossy().starts_with("AWS_") {
                 c.env_remove(k);
