@@ -489,3 +489,41 @@ fn storage_failures_are_one_clear_line_and_leave_nothing_half_written() {
         assert_eq!(s3.objects(&ds), s3.objects(&reference), "{prefix}");
     }
 }
+
+#[test]
+fn a_cut_recording_in_a_bucket_is_recovered_there() {
+    let s3 = shared();
+    let dir = tempfile::tempdir().unwrap();
+    episodes(dir.path(), 1);
+    let whole = std::fs::read(dir.path().join("episode_000001.mcap")).unwrap();
+    let rec = dir.path().join("rec");
+    std::fs::create_dir(&rec).unwrap();
+    let partial = rec.join("episode_000001.mcap.partial");
+    std::fs::write(&partial, &whole[..whole.len() * 3 / 4]).unwrap();
+    s3.upload_dir(&rec, &url("data", "recover"));
+    let recover = || {
+        s3.scaledp(&s3.endpoint)
+            .args(["recover", "s3://data/recover/episode_000001.mcap.partial"])
+            .output()
+            .unwrap()
+    };
+    let out = recover();
+    assert_eq!(out.status.code(), Some(3), "{}", text(&out));
+    assert!(
+        text(&out).starts_with("s3://data/recover/episode_000001.mcap: "),
+        "{}",
+        text(&out)
+    );
+    let out = convert(
+        &s3.endpoint,
+        "s3://data/recover/",
+        "s3://data/recover-ds",
+        &[],
+    );
+    assert!(text(&out).contains("1 converted"), "{}", text(&out));
+    let out = recover();
+    one_clear_line(
+        &out,
+        &["s3://data/recover/episode_000001.mcap: output exists"],
+    );
+}
