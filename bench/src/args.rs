@@ -78,6 +78,10 @@ pub struct BenchConvertArgs {
     /// Skip the Python baseline.
     #[arg(long)]
     pub no_python: bool,
+    /// Skip the S3 row (the recordings converted bucket to bucket on a loopback moto server
+    /// from the tests' venv).
+    #[arg(long)]
+    pub no_s3: bool,
     /// The Python of the baseline, with rosbags, numpy, Pillow and pyarrow (default:
     /// $SCALEDP_PYTHON, else .venv/bin/python in the workspace holding the current directory,
     /// which `bash scripts/setup-python.sh` makes).

@@ -11,6 +11,7 @@ use anyhow::{bail, Context, Result};
 use scaledp_schema::Rig;
 use scaledp_testkit::{load_average, measure, Measured, TEST_VENV};
 
+use crate::convert_s3::{self, Route};
 use crate::disk::dir_bytes;
 use crate::python::{run_convert_baseline, ConvertRun, NotRun, Python};
 use crate::synth::synthesize;
@@ -54,6 +55,15 @@ pub fn run(args: BenchConvertArgs) -> Result<Outcome> {
     let dirs = Dirs::prepare(args.out.as_deref())?;
     let input = generate(&dirs, &rig, &args, jobs)?;
     let ours = convert(&dirs, jobs)?;
+    let s3 = if args.no_s3 {
+        Err(anyhow::anyhow!("skipped (--no-s3)"))
+    } else {
+        convert_s3::s3_route(&dirs.recordings, jobs, &TEST_VENV)
+    };
+    // Output frames per camera frame: a 30 Hz camera at a 10 Hz control rate keeps every third.
+    let camera_hz = rig.cameras.first().map_or(rig.control_rate_hz, |c| c.fps);
+    let stride = (camera_hz / rig.control_rate_hz).round().max(1.0) as usize;
+    let floor = convert_s3::floor_route(&dirs.recordings, rig.cameras.len(), stride, jobs);
     let python = if args.no_python {
         Err(NotRun::Skipped)
     } else {
@@ -65,6 +75,7 @@ pub fn run(args: BenchConvertArgs) -> Result<Outcome> {
 
     print_header(&args, &rig, &input, cores, jobs);
     print_routes(&input, &ours, &python, &dirs.python)?;
+    print_s3_and_floor(&input, &ours, &s3, &floor);
     println!(
         "machine load (1-minute average, {cores} cores): {} before this benchmark, {} after",
         load_before.map_or("n/a".into(), |l| format!("{l:.2}")),
@@ -260,5 +271,64 @@ fn print_comparison(ours: &Ours, py: &ConvertRun) {
                 ours_cpu / py_cpu
             );
         }
+    }
+}
+
+/// The S3 row, the floor row and the converter over its floor (or why a row did not run).
+fn print_s3_and_floor(
+    input: &Input,
+    ours: &Ours,
+    s3: &Result<Route>,
+    floor: &Result<(f64, Option<f64>, u64)>,
+) {
+    let row = |name: &str,
+               frames: u64,
+               secs: f64,
+               out: Option<u64>,
+               rss: Option<u64>,
+               cpu: Option<f64>| {
+        println!(
+            "{name:<16} {frames:>7} {secs:>8.2} {:>9.1} {:>8.1} {:>9} {:>12} {:>7}",
+            frames as f64 / secs,
+            input.bytes as f64 / 1e6 / secs,
+            out.map_or("n/a".into(), |b| format!("{:.2}", b as f64 / 1e6 / secs)),
+            rss.map_or("n/a".into(), |b| format!("{:.0}", b as f64 / 1e6)),
+            cpu.map_or("n/a".into(), |c| format!("{c:.1}"))
+        );
+    };
+    match s3 {
+        Ok(r) => {
+            row(
+                "scaledp S3→S3",
+                r.frames,
+                r.m.wall_s,
+                Some(r.output_bytes),
+                r.m.peak_rss,
+                r.m.cpu_s,
+            );
+            println!(
+                "S3: recordings and dataset in a loopback moto server (Python, on the same cores; \
+                 its CPU is not in the row): {:.2}× the local frames/s",
+                (r.frames as f64 / r.m.wall_s) / (ours.frames as f64 / ours.m.wall_s)
+            );
+        }
+        Err(e) => println!("S3 row skipped: {e:#}"),
+    }
+    match floor {
+        Ok((secs, cpu, frames)) => {
+            row("floor", *frames, *secs, None, None, *cpu);
+            let ratio = (ours.frames as f64 / ours.m.wall_s) / (*frames as f64 / secs);
+            println!(
+                "floor: every chunk decompressed + each kept frame resized and encoded, nothing \
+                 else, in this process; converter / floor: {ratio:.2} (goal ≥ 0.8: {})",
+                if ratio >= 0.8 { "met" } else { "NOT met" }
+            );
+            // Per CPU second the ratio hardly depends on what else runs on the machine.
+            if let (Some(c), Some(f)) = (ours.m.cpu_s, cpu) {
+                let per_cpu = (ours.frames as f64 / c) / (*frames as f64 / f);
+                println!("per CPU second: converter / floor {per_cpu:.2}");
+            }
+        }
+        Err(e) => println!("floor row failed: {e:#}"),
     }
 }

@@ -5,7 +5,8 @@
 //! - [`BenchCommand::Record`]: the reference load published over loopback into a
 //!   `scaledp record` child process; published vs recorded counts, drops, MB/s, recorder CPU.
 //! - [`BenchCommand::Convert`]: generated recordings converted by a `scaledp convert` child;
-//!   frames/s, MB/s, peak memory, beside the usual single-process Python route.
+//!   frames/s, MB/s, peak memory, beside the usual single-process Python route, the same
+//!   conversion bucket to bucket on a loopback S3 endpoint, and the converter's floor.
 //! - [`BenchCommand::Load`]: one shuffled loader epoch over a generated dataset; samples/s,
 //!   images/s, MB/s, peak memory, beside pure JPEG decoding, the Python module and LeRobot's
 //!   DataLoader, then a streaming epoch over a larger dataset.
@@ -31,6 +32,7 @@
 
 mod args;
 mod convert;
+mod convert_s3;
 mod disk;
 mod load;
 mod python;

@@ -7,6 +7,11 @@
 //! - **A batch job**: [`collect_inputs`] expands paths into inputs, [`run`] converts them into
 //!   a dataset ([`JobOptions`], [`Progress`] events, one [`InputResult`] per input), [`merge`]
 //!   joins datasets, [`shard`] and [`content_hash`] are what `--shard` and resuming use.
+//! - **Object storage**: [`collect`] expands local paths and `s3://` [`Location`]s into
+//!   [`Input`]s, [`run_inputs`] converts them into a dataset at a path or URL (ranged reads of
+//!   MCAP objects, a staged upload published with `meta/info.json` last), [`merge_datasets`]
+//!   joins datasets anywhere ([`MergeOptions`]).
+//! - [`floor`] is the converter's floor on a machine (what `bench convert` compares with).
 //! - **One input**: [`read_input`] (or [`read_mcap`], [`read_ros1_bag`], [`read_rosbag2`])
 //!   reads a [`Recording`]; [`convert`] turns it into an [`Episode`] with [`ConvertOptions`],
 //!   its frames from a [`FrameStore`] ([`InMemory`] for a recording read whole).
@@ -27,6 +32,7 @@ mod decode;
 mod destination;
 mod detect;
 mod encode_pool;
+mod floor;
 // Public only for the paths callers used before the re-exports below
 // (`scaledp_converter::episode::convert` in sim/tests): use the crate root.
 #[doc(hidden)]
@@ -63,6 +69,7 @@ pub use align::{align, Alignment, AlignmentReport, Stream, StreamReport};
 pub use batch::{run, run_inputs, InputResult, Progress};
 pub use episode::{convert, state_names, CameraFrames, Episode};
 pub use error::{Error, Result};
+pub use floor::{floor, FloorReport};
 pub use frames::{FrameKey, FrameStore, InMemory};
 pub use inputs::{collect_inputs, content_hash, read_input, shard};
 pub use lerobot::{EpisodeRecord, Sidecar};
