@@ -44,7 +44,7 @@ struct Checkpoint {
 /// A dataset being written, locally or to object storage.
 pub(crate) enum Destination {
     /// A local directory.
-    Local(Dataset),
+    Local(Box<Dataset>),
     /// A prefix in object storage.
     Object(Box<ObjectDestination>),
 }
@@ -83,9 +83,11 @@ impl Destination {
         work_dir: &Path,
     ) -> Result<Self> {
         match out {
-            Location::Local(root) => {
-                Ok(Self::Local(Dataset::open(root, overwrite, file_size_mib)?))
-            }
+            Location::Local(root) => Ok(Self::Local(Box::new(Dataset::open(
+                root,
+                overwrite,
+                file_size_mib,
+            )?))),
             Location::Object(url) => Ok(Self::Object(Box::new(ObjectDestination::open(
                 url,
                 overwrite,
