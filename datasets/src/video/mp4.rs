@@ -38,7 +38,9 @@ const MAX_SAMPLES: usize = 6_000_000;
 
 impl Track {
     /// Reads the index of the first video track from `reader` (`size` bytes).
-    pub fn read<R: Read + Seek>(reader: R, size: u64) -> Result<Track, String> {
+    pub fn read<R: Read + Seek>(mut reader: R, size: u64) -> Result<Track, String> {
+        let size = readable_end(&mut reader, size)?;
+        reader.rewind().map_err(|e| e.to_string())?;
         let mp4 = re_mp4::Mp4::read(reader, size).map_err(|e| {
             let e = e.to_string();
             if e.contains("larger size")
@@ -115,6 +117,47 @@ impl Track {
             .unwrap_or(0);
         (self.by_pts[best], (pts(best) - t_s).abs())
     }
+}
+
+/// Where the boxes worth parsing end: the file's size, or — when a box runs past the end of a
+/// file cut short, after the index (`moov`) was complete — the end of the last whole box, so
+/// the frames before the cut still load and those after it fail one by one. A cut before the
+/// index is an error.
+fn readable_end<R: Read + Seek>(r: &mut R, size: u64) -> Result<u64, String> {
+    let (mut at, mut moov) = (0u64, false);
+    while at + 8 <= size {
+        let mut h = [0u8; 16];
+        r.seek(std::io::SeekFrom::Start(at))
+            .and_then(|_| r.read_exact(&mut h[..8]))
+            .map_err(|e| format!("MP4 box header at {at}: {e}"))?;
+        let small = u64::from(u32::from_be_bytes([h[0], h[1], h[2], h[3]]));
+        let kind = String::from_utf8_lossy(&h[4..8]).into_owned();
+        let len = match small {
+            0 => size - at,
+            1 => {
+                r.read_exact(&mut h[8..16])
+                    .map_err(|e| format!("MP4 box header at {at}: {e}"))?;
+                u64::from_be_bytes([h[8], h[9], h[10], h[11], h[12], h[13], h[14], h[15]])
+            }
+            n => n,
+        };
+        if len < 8 {
+            return Err(format!(
+                "not a readable MP4: {kind} box of {len} bytes at {at}"
+            ));
+        }
+        if at.saturating_add(len) > size {
+            if moov {
+                return Ok(at);
+            }
+            return Err(format!(
+                "MP4 cut short: its {kind} box at {at} needs {len} bytes, the file has {size}"
+            ));
+        }
+        moov |= kind == "moov";
+        at += len;
+    }
+    Ok(size)
 }
 
 /// Decode-order samples with their groups: a group starts at a keyframe (sync sample) and
