@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
-# Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline: the
-# LeRobotDataset + torch DataLoader route on the same dataset. Benchmarks only, never CI — it
-# pulls torch from PyPI (several GB). `scaledp bench load` finds it at .venv-bench/bin/python
-# (or set SCALEDP_BENCH_PYTHON).
+# Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline (the
+# LeRobotDataset + torch DataLoader route on the same dataset) and for the video conformance
+# tests (datasets/tests/lerobot_video.rs: frames of a dataset LeRobot wrote, as LeRobot returns
+# them). It pulls torch from PyPI (about 4.6 GB of wheels, CUDA libraries included); a second
+# run finds everything installed. `scaledp bench load` and the tests find it at
+# .venv-bench/bin/python (or set SCALEDP_BENCH_PYTHON).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
