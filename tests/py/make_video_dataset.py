@@ -14,11 +14,15 @@ that), as REFERENCE/<file path with / as _>.rgb (frames x H x W x 3 bytes) and a
 of their presentation times.
 
 Usage: make_video_dataset.py DATASET REFERENCE --keys k1,k2 [--codec av1|h264|hevc]
-                             [--episodes-per-file N] [--gop 2]
+                             [--episodes-per-file N] [--gop 2] [--no-reference]
+The dataset's own meta/episodes files get the video columns (a minimal file is written when it
+has none); `scaledp bench load` uses the same script for its video dataset.
 Prints JSON {"files": {rel: {"times": [...], "width": W, "height": H, "rgb": path}}}.
 """
 import argparse
+import hashlib
 import io
+import shutil
 import json
 from fractions import Fraction
 from pathlib import Path
@@ -81,14 +85,34 @@ def reference(path):
     return times, np.stack(frames)
 
 
+def decode_all(encoded):
+    return [np.asarray(Image.open(io.BytesIO(b)).convert("RGB")) for b in encoded]
+
+
+def episode_frames(data_files, key):
+    """(episode_index, [encoded images]) of `key`, episode after episode, one data file in memory at a time."""
+    for f in data_files:
+        t = pq.read_table(f, columns=["episode_index", key])
+        eps = t.column("episode_index").to_pylist()
+        imgs = t.column(key).combine_chunks().field("bytes")
+        start = 0
+        while start < len(eps):
+            end = start
+            while end < len(eps) and eps[end] == eps[start]:
+                end += 1
+            yield eps[start], [imgs[i].as_py() for i in range(start, end)]
+            start = end
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("dataset")
-    ap.add_argument("reference")
+    ap.add_argument("reference", help="where decoded references go (and temporary parts)")
     ap.add_argument("--keys", required=True)
     ap.add_argument("--codec", default="av1", choices=sorted(ENCODERS))
     ap.add_argument("--episodes-per-file", type=int, default=1000)
     ap.add_argument("--gop", type=int, default=2)
+    ap.add_argument("--no-reference", action="store_true", help="skip decoding the files back")
     a = ap.parse_args()
     root, ref_dir = Path(a.dataset), Path(a.reference)
     ref_dir.mkdir(parents=True, exist_ok=True)
@@ -96,65 +120,68 @@ def main():
     fps = info["fps"]
     keys = [k if k.startswith("observation.images.") else f"observation.images.{k}" for k in a.keys.split(",")]
     data_files = sorted((root / "data").glob("*/*.parquet"))
-    tables = [pq.read_table(f) for f in data_files]
-    rows = pa.concat_tables(tables).to_pydict()
-    episodes = sorted(set(rows["episode_index"]))
-    meta = {
-        "episode_index": episodes,
-        "length": [rows["episode_index"].count(e) for e in episodes],
-        "tasks": [["test"] for _ in episodes],
-        "data/chunk_index": [0 for _ in episodes],
-        "data/file_index": [0 for _ in episodes],
-    }
-    start = 0
-    meta["dataset_from_index"], meta["dataset_to_index"] = [], []
-    for n in meta["length"]:
-        meta["dataset_from_index"].append(start)
-        meta["dataset_to_index"].append(start + n)
-        start += n
+    video_cols = {}
     out_files = {}
     tmp = ref_dir / "parts"
     tmp.mkdir(exist_ok=True)
     for key in keys:
-        cols = {c: [] for c in ("chunk_index", "file_index", "from_timestamp", "to_timestamp")}
-        shape = None
-        groups = [episodes[i:i + a.episodes_per_file] for i in range(0, len(episodes), a.episodes_per_file)]
-        for file_index, group in enumerate(groups):
-            parts, t, stream = [], Fraction(0), []
-            for e in group:
-                frames = [
-                    np.asarray(Image.open(io.BytesIO(img["bytes"])).convert("RGB"))
-                    for img, ep in zip(rows[key], rows["episode_index"])
-                    if ep == e
-                ]
-                shape = frames[0].shape
-                if a.codec == "av1":
-                    part = tmp / f"{key}-{e}.mp4"
-                    encode(frames, part, a.codec, fps, a.gop)
-                    parts.append(part)
-                else:
-                    stream += frames
-                duration = Fraction(len(frames), 1) / Fraction(fps)
-                cols["chunk_index"].append(0)
-                cols["file_index"].append(file_index)
-                cols["from_timestamp"].append(float(t))
-                cols["to_timestamp"].append(float(t + duration))
-                t += duration
+        cols = {c: {} for c in ("chunk_index", "file_index", "from_timestamp", "to_timestamp")}
+        shape, group, file_index = None, [], 0
+
+        def close_file():
+            nonlocal group, file_index
+            parts = [p for p, _ in group]
             rel = f"videos/{key}/chunk-000/file-{file_index:03d}.mp4"
             (root / rel).parent.mkdir(parents=True, exist_ok=True)
-            if parts:
+            if a.codec == "av1":
                 concatenate(parts, root / rel)
+                for p in parts:
+                    p.unlink()
             else:
                 # x264/x265 B-frames do not survive the concat demuxer: one stream per file.
-                encode(stream, root / rel, a.codec, fps, a.gop)
-            for p in parts:
-                p.unlink()
-            times, frames = reference(root / rel)
-            rgb = ref_dir / (rel.replace("/", "_") + ".rgb")
-            rgb.write_bytes(frames.tobytes())
-            out_files[rel] = {"times": times, "height": int(frames.shape[1]), "width": int(frames.shape[2]), "rgb": str(rgb)}
-        for c, v in cols.items():
-            meta[f"videos/{key}/{c}"] = v
+                encode([f for _, frames in group for f in frames], root / rel, a.codec, fps, a.gop)
+            if not a.no_reference:
+                times, frames = reference(root / rel)
+                rgb = ref_dir / (rel.replace("/", "_") + ".rgb")
+                rgb.write_bytes(frames.tobytes())
+                out_files[rel] = {"times": times, "height": int(frames.shape[1]),
+                                  "width": int(frames.shape[2]), "rgb": str(rgb)}
+            group, file_index = [], file_index + 1
+
+        t = Fraction(0)
+        # Episodes with the same images (a dataset merged with itself) are encoded once.
+        encoded_parts = {}
+        for e, encoded in episode_frames(data_files, key):
+            digest = hashlib.sha256(b"".join(encoded)).hexdigest()
+            if shape is None:
+                shape = decode_all(encoded[:1])[0].shape
+            if a.codec == "av1":
+                part = tmp / f"{e}.mp4"
+                if digest in encoded_parts:
+                    shutil.copyfile(encoded_parts[digest], part)
+                else:
+                    encode(decode_all(encoded), part, a.codec, fps, a.gop)
+                    kept = tmp / f"cache-{digest}.mp4"
+                    shutil.copyfile(part, kept)
+                    encoded_parts[digest] = kept
+                group.append((part, None))
+            else:
+                group.append((None, decode_all(encoded)))
+            frames = encoded
+            duration = Fraction(len(frames), 1) / Fraction(fps)
+            cols["chunk_index"][e] = 0
+            cols["file_index"][e] = file_index
+            cols["from_timestamp"][e] = float(t)
+            cols["to_timestamp"][e] = float(t + duration)
+            t += duration
+            if len(group) == a.episodes_per_file:
+                close_file()
+                t = Fraction(0)
+        if group:
+            close_file()
+        for kept in encoded_parts.values():
+            kept.unlink()
+        video_cols[key] = cols
         info["features"][key] = {
             "dtype": "video",
             "shape": list(shape),
@@ -171,10 +198,41 @@ def main():
             },
         }
     tmp.rmdir()
-    for f, t in zip(data_files, tables):
+    for f in data_files:
+        t = pq.read_table(f)
         pq.write_table(t.drop_columns([k for k in keys if k in t.column_names]), f)
-    (root / "meta/episodes/chunk-000").mkdir(parents=True, exist_ok=True)
-    pq.write_table(pa.table(meta), root / "meta/episodes/chunk-000/file-000.parquet")
+    # meta/episodes: the video columns added to what is there (LeRobot's or our converter's
+    # files), or a minimal file for a fixture that has none.
+    ep_files = sorted((root / "meta/episodes").glob("*/*.parquet"))
+    if not ep_files:
+        t = pq.read_table(data_files[0], columns=["episode_index"]) if len(data_files) == 1 else \
+            pa.concat_tables([pq.read_table(f, columns=["episode_index"]) for f in data_files])
+        eps = t.column("episode_index").to_pylist()
+        episodes = sorted(set(eps))
+        lengths = [eps.count(e) for e in episodes]
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).tolist()
+        table = pa.table({
+            "episode_index": episodes,
+            "length": lengths,
+            "tasks": [["test"] for _ in episodes],
+            "data/chunk_index": [0] * len(episodes),
+            "data/file_index": [0] * len(episodes),
+            "dataset_from_index": starts,
+            "dataset_to_index": [s + n for s, n in zip(starts, lengths)],
+        })
+        ep_files = [root / "meta/episodes/chunk-000/file-000.parquet"]
+        ep_files[0].parent.mkdir(parents=True, exist_ok=True)
+        pq.write_table(table, ep_files[0])
+    for f in ep_files:
+        table = pq.read_table(f)
+        eps = table.column("episode_index").to_pylist()
+        for key, cols in video_cols.items():
+            for c, values in cols.items():
+                name = f"videos/{key}/{c}"
+                if name in table.column_names:
+                    table = table.drop_columns([name])
+                table = table.append_column(name, pa.array([values[e] for e in eps]))
+        pq.write_table(table, f)
     info["video_path"] = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"
     (root / "meta/info.json").write_text(json.dumps(info, indent=4))
     print(json.dumps({"files": out_files}))
