@@ -12,6 +12,12 @@ LEROBOT_VERSION=0.4.4
 if [ ! -x .venv-bench/bin/python ]; then
   "$PY" -m venv .venv-bench
 fi
+# Already there: nothing to ask PyPI (pip's no-op resolution of LeRobot's ~120 packages
+# still took 2 minutes here).
+if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.version('lerobot') != '${LEROBOT_VERSION}')" 2>/dev/null; then
+  echo "bench python ready: lerobot ${LEROBOT_VERSION} (installed)"
+  exit 0
+fi
 .venv-bench/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
 .venv-bench/bin/python -m pip install --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
