@@ -94,6 +94,26 @@ impl DecoderCache {
                 "keyframe {keyframe} of sample {target} was not read (internal error)"
             ));
         }
+        let fresh = |slot: Option<Slot>| -> Result<Slot, String> {
+            // Same track, another place: start again at the keyframe, reusing the decoder.
+            if let Some(mut slot) = slot {
+                if slot.dec.reset() {
+                    slot.keyframe = keyframe;
+                    slot.next = keyframe;
+                    slot.shown = 0;
+                    slot.flushed = false;
+                    return Ok(slot);
+                }
+            }
+            Ok(Slot {
+                track_id: span.track_id,
+                dec: new_decoder(track.codec, &track.config)?,
+                keyframe,
+                next: keyframe,
+                shown: 0,
+                flushed: false,
+            })
+        };
         let mut slot = match self.take(span, keyframe, rank) {
             Some(slot)
                 if slot.keyframe == keyframe
@@ -103,14 +123,7 @@ impl DecoderCache {
             {
                 slot
             }
-            _ => Slot {
-                track_id: span.track_id,
-                dec: new_decoder(track.codec, &track.config)?,
-                keyframe,
-                next: keyframe,
-                shown: 0,
-                flushed: false,
-            },
+            other => fresh(other)?,
         };
         let mut got = false;
         let result = decode_to(&mut slot, span, rank, &mut |p| {
@@ -120,6 +133,11 @@ impl DecoderCache {
         match result {
             Ok(()) if got => {
                 if !slot.flushed {
+                    self.put(slot);
+                } else if slot.dec.reset() {
+                    // Kept to start again elsewhere: its position no longer fits any span.
+                    slot.flushed = false;
+                    slot.next = usize::MAX;
                     self.put(slot);
                 }
                 Ok(())

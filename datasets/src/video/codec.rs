@@ -20,6 +20,9 @@ pub(crate) trait Decode: Send {
     fn push(&mut self, sample: &[u8], out: &mut dyn FnMut(Yuv420<'_>)) -> Result<(), String>;
     /// Hands out the pictures still held back for reordering.
     fn flush(&mut self, out: &mut dyn FnMut(Yuv420<'_>)) -> Result<(), String>;
+    /// Forgets the stream so far, to start again at a keyframe of the same codec; false when
+    /// the decoder cannot, and a new one must be made.
+    fn reset(&mut self) -> bool;
 }
 
 /// A fresh decoder for `codec`; `config` is the sample entry's configuration record (`avcC`
@@ -99,6 +102,13 @@ impl Decode for Av1 {
 
     fn flush(&mut self, out: &mut dyn FnMut(Yuv420<'_>)) -> Result<(), String> {
         self.drain(out)
+    }
+
+    fn reset(&mut self) -> bool {
+        // dav1d's seek: drops every picture and reference, keeps its allocations (opening a
+        // decoder per group of pictures cost most of the decoding time with LeRobot's GOP of 2).
+        self.dec.flush();
+        true
     }
 }
 
@@ -228,6 +238,11 @@ impl Decode for H264 {
             emit_h264(p, out)?;
         }
         Ok(())
+    }
+
+    fn reset(&mut self) -> bool {
+        // OpenH264 has no call that drops held-back pictures: a new decoder is made.
+        false
     }
 }
 
