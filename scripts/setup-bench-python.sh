@@ -1,14 +1,22 @@
 #!/usr/bin/env bash
-# Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline: the
-# LeRobotDataset + torch DataLoader route on the same dataset. Benchmarks only, never CI — it
-# pulls torch from PyPI (several GB). `scaledp bench load` finds it at .venv-bench/bin/python
-# (or set SCALEDP_BENCH_PYTHON).
+# Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline (the
+# LeRobotDataset + torch DataLoader route on the same dataset) and for the video conformance
+# tests (datasets/tests/lerobot_video.rs: frames of a dataset LeRobot wrote, as LeRobot returns
+# them). It pulls torch from PyPI (about 4.6 GB of wheels, CUDA libraries included); a second
+# run finds everything installed. `scaledp bench load` and the tests find it at
+# .venv-bench/bin/python (or set SCALEDP_BENCH_PYTHON).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 LEROBOT_VERSION=0.4.4
 if [ ! -x .venv-bench/bin/python ]; then
   "$PY" -m venv .venv-bench
+fi
+# Already there: nothing to ask PyPI (pip's no-op resolution of LeRobot's ~120 packages
+# still took 2 minutes here).
+if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.version('lerobot') != '${LEROBOT_VERSION}')" 2>/dev/null; then
+  echo "bench python ready: lerobot ${LEROBOT_VERSION} (installed)"
+  exit 0
 fi
 .venv-bench/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
 .venv-bench/bin/python -m pip install --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"

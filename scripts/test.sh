@@ -27,6 +27,11 @@ trap report EXIT
 bash scripts/setup-python.sh
 step "python peers (.venv)"
 
+# LeRobot 0.4.4 and torch (several GB from PyPI, kept in .venv-bench between runs): the video
+# conformance tests read what LeRobot itself writes and returns.
+bash scripts/setup-bench-python.sh
+step "lerobot (.venv-bench)"
+
 cargo fmt --all -- --check
 step "cargo fmt --check"
 

@@ -123,6 +123,12 @@ pub struct BenchLoadArgs {
     /// Skip the Python routes (LeRobot's DataLoader and our module `scaledp_data`).
     #[arg(long, alias = "no-lerobot")]
     pub no_python: bool,
+    /// Also measure the same dataset with its cameras as video features of this codec
+    /// (written from the JPEGs with LeRobot's encoder settings by PyAV on the benchmark Python,
+    /// cached beside the JPEG dataset): our loader on it, LeRobot's DataLoader on it (pyav
+    /// backend) and, with a streaming run, the larger dataset as video.
+    #[arg(long, value_enum, default_value = "av1")]
+    pub video: BenchVideo,
     /// The Python of both routes, with LeRobot and torch (default: $SCALEDP_BENCH_PYTHON, else
     /// .venv-bench/bin/python in the workspace holding the current directory, which
     /// `bash scripts/setup-bench-python.sh` makes). The scaledp_data wheel comes from
@@ -142,6 +148,28 @@ pub struct BenchLoadArgs {
     /// Internal: the dataset of a --worker run.
     #[arg(long, hide = true)]
     pub dataset: Option<PathBuf>,
+}
+
+/// The codec of `bench load`'s video dataset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BenchVideo {
+    /// libsvtav1, yuv420p, g=2, crf=30, preset 12 (LeRobot 0.4.4's defaults).
+    Av1,
+    /// libx264, yuv420p, g=2, crf 23.
+    H264,
+    /// No video routes.
+    None,
+}
+
+impl BenchVideo {
+    /// The codec name `make_video_dataset.py --codec` takes, None for no video.
+    pub fn codec(self) -> Option<&'static str> {
+        match self {
+            BenchVideo::Av1 => Some("av1"),
+            BenchVideo::H264 => Some("h264"),
+            BenchVideo::None => None,
+        }
+    }
 }
 
 /// `scaledp bench train`.

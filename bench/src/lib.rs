@@ -41,8 +41,8 @@ mod synth;
 mod train;
 
 pub use args::{
-    BenchCommand, BenchConvertArgs, BenchLoadArgs, BenchRecordArgs, BenchTrainArgs, Compression,
-    WorkerMode,
+    BenchCommand, BenchConvertArgs, BenchLoadArgs, BenchRecordArgs, BenchTrainArgs, BenchVideo,
+    Compression, WorkerMode,
 };
 
 /// How a benchmark that ran to the end went.

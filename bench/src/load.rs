@@ -5,10 +5,12 @@
 //! once more with the loader's own decoder, which also lays pixels out channel-first); then
 //! our loader from Python (`scaledp_data`) and LeRobot's `LeRobotDataset` + torch `DataLoader`
 //! read the same files; then a streaming epoch runs over a dataset several times larger, for
-//! its peak memory.
+//! its peak memory. With `--video av1|h264` (default av1) the same frames stored as video
+//! features go through our loader, LeRobot's DataLoader and a streaming epoch too.
 
 mod data;
 mod decode;
+mod video;
 mod worker;
 
 use std::path::{Path, PathBuf};
@@ -31,6 +33,21 @@ const TARGET_DECODE_RATIO: f64 = 0.8;
 const TARGET_LEROBOT_RATIO: f64 = 5.0;
 /// Peak resident memory of the streaming run (bytes).
 const TARGET_STREAMING_RSS: u64 = 2_000_000_000;
+/// Loader samples/s on video over the same loader on JPEG: "within 2×".
+const TARGET_VIDEO_JPEG_RATIO: f64 = 0.5;
+
+/// The video routes: our loader and LeRobot's on the video dataset, and a streaming epoch over
+/// the larger dataset as video.
+struct VideoRuns {
+    codec: &'static str,
+    how: String,
+    dataset: PathBuf,
+    video_bytes: u64,
+    ours: (Measured, EpochReport),
+    lerobot: Result<LeRobotRun, NotRun>,
+    /// The epoch, the video bytes of its dataset, how it was made, its frames uncompressed.
+    streaming: Option<((Measured, EpochReport), u64, String, u64)>,
+}
 
 /// Everything one run measured.
 struct Runs {
@@ -46,6 +63,8 @@ struct Runs {
     lerobot: Result<LeRobotRun, NotRun>,
     /// The streaming epoch, the bytes of its dataset and how that was made.
     streaming: Option<((Measured, EpochReport), u64, String)>,
+    /// The video routes, or why they did not run.
+    video: Option<Result<VideoRuns, String>>,
 }
 
 /// One row of the table.
@@ -108,13 +127,34 @@ fn measure_all(args: &BenchLoadArgs, cores: usize, threads: usize) -> Result<Run
     // 3. Our loader from Python, and LeRobot, on the same files.
     let (module, lerobot) = python_routes(args, &dataset, &cache, threads);
     // 4. Streaming over a larger dataset.
-    let streaming = if args.streaming_factor == 0 {
+    let larger = if args.streaming_factor == 0 {
         None
     } else {
-        let (large, large_how) = ensure_larger(&cache, &dataset, &spec, args.streaming_factor)?;
-        let r = worker::spawn(WorkerMode::Streaming, &large, args, threads)?;
-        Some((r, dir_bytes(&large.join("data"))?, large_how))
+        Some(ensure_larger(
+            &cache,
+            &dataset,
+            &spec,
+            args.streaming_factor,
+        )?)
     };
+    let streaming = match &larger {
+        None => None,
+        Some((large, large_how)) => {
+            let r = worker::spawn(WorkerMode::Streaming, large, args, threads)?;
+            Some((r, dir_bytes(&large.join("data"))?, large_how.clone()))
+        }
+    };
+    // 5. The same frames as video.
+    let video = args.video.codec().map(|codec| {
+        video_routes(
+            args,
+            codec,
+            &dataset,
+            &cache,
+            larger.as_ref().map(|l| l.0.as_path()),
+            threads,
+        )
+    });
     Ok(Runs {
         threads,
         cores,
@@ -125,6 +165,75 @@ fn measure_all(args: &BenchLoadArgs, cores: usize, threads: usize) -> Result<Run
         ours,
         pure,
         module,
+        lerobot,
+        streaming,
+        video,
+    })
+}
+
+/// Frames × video cameras × H × W × 3 of a dataset (`info.json`): its frames uncompressed.
+fn uncompressed_bytes(dataset: &Path) -> Result<u64> {
+    let path = dataset.join("meta/info.json");
+    let info: serde_json::Value = serde_json::from_slice(&std::fs::read(&path)?)
+        .with_context(|| format!("parsing {}", path.display()))?;
+    let frames = info["total_frames"].as_u64().context("total_frames")?;
+    let per_frame: u64 = info["features"]
+        .as_object()
+        .context("features")?
+        .values()
+        .filter(|f| f["dtype"] == "video")
+        .map(|f| {
+            f["shape"]
+                .as_array()
+                .map_or(0, |s| s.iter().filter_map(|v| v.as_u64()).product())
+        })
+        .sum();
+    Ok(frames * per_frame)
+}
+
+/// Makes (or reuses) the video datasets and runs our loader and LeRobot's on them.
+fn video_routes(
+    args: &BenchLoadArgs,
+    codec: &'static str,
+    dataset: &Path,
+    cache: &Path,
+    larger: Option<&Path>,
+    threads: usize,
+) -> Result<VideoRuns, String> {
+    let py = Python::locate(&BENCH_VENV, args.python.as_deref()).map_err(|e| e.to_string())?;
+    let fail = |e: anyhow::Error| format!("{e:#}");
+    let (video_ds, how) = video::ensure_video(&py, dataset, codec).map_err(fail)?;
+    let video_bytes = dir_bytes(&video_ds.join("videos")).map_err(fail)?;
+    let ours = worker::spawn(WorkerMode::Random, &video_ds, args, threads).map_err(fail)?;
+    let lerobot = if args.no_python {
+        Err(NotRun::Skipped)
+    } else {
+        let route = LoadRoute {
+            dataset: &video_ds,
+            cache,
+            batch_size: args.batch_size,
+            threads,
+            lerobot_batches: args.lerobot_batches,
+        };
+        run_lerobot(&py, &route)
+    };
+    let streaming = match larger {
+        None => None,
+        Some(large) => {
+            let (large_video, large_how) = video::ensure_video(&py, large, codec).map_err(fail)?;
+            let r =
+                worker::spawn(WorkerMode::Streaming, &large_video, args, threads).map_err(fail)?;
+            let bytes = dir_bytes(&large_video.join("videos")).map_err(fail)?;
+            let raw = uncompressed_bytes(&large_video).map_err(fail)?;
+            Some((r, bytes, large_how, raw))
+        }
+    };
+    Ok(VideoRuns {
+        codec,
+        how,
+        dataset: video_ds,
+        video_bytes,
+        ours,
         lerobot,
         streaming,
     })
@@ -184,6 +293,7 @@ fn print_report(args: &BenchLoadArgs, runs: &Runs) {
     );
     print_decode_verdict(runs);
     print_python_verdicts(args, runs);
+    print_video_verdicts(args, runs);
     if let Some((r, bytes, large_how)) = &runs.streaming {
         let rss = r.0.peak_rss;
         let met = rss.is_some_and(|b| b <= TARGET_STREAMING_RSS);
@@ -238,7 +348,75 @@ fn rows(args: &BenchLoadArgs, runs: &Runs) -> Vec<Row> {
         let route = format!("loader streaming ×{}", args.streaming_factor);
         rows.push(worker_row(&route, r));
     }
+    if let Some(Ok(v)) = &runs.video {
+        rows.push(worker_row(&format!("scaledp loader {}", v.codec), &v.ours));
+        if let Ok(r) = &v.lerobot {
+            rows.push(Row {
+                route: format!("LeRobot DataLoader {}", v.codec),
+                samples: Some(r.samples),
+                images: Some(r.samples * OBS_HORIZON as u64 * cameras(&v.ours.1)),
+                seconds: r.seconds,
+                bytes: None,
+                peak_rss: r.m.peak_rss,
+            });
+        }
+        if let Some((r, _, _, _)) = &v.streaming {
+            let route = format!("streaming ×{} {}", args.streaming_factor, v.codec);
+            rows.push(worker_row(&route, r));
+        }
+    }
     rows
+}
+
+/// The video routes' verdicts: against our JPEG path, against LeRobot, streaming memory.
+fn print_video_verdicts(args: &BenchLoadArgs, runs: &Runs) {
+    let v = match &runs.video {
+        None => return,
+        Some(Err(why)) => {
+            println!("video routes: not run — {why}");
+            return;
+        }
+        Some(Ok(v)) => v,
+    };
+    let rate = |r: &EpochReport| r.samples as f64 / r.seconds;
+    let video_rate = rate(&v.ours.1);
+    println!(
+        "video: {} ({:.0} MB of video in {}, vs {:.0} MB of parquet for the JPEG dataset)",
+        v.how,
+        v.video_bytes as f64 / 1e6,
+        v.dataset.display(),
+        runs.data_bytes as f64 / 1e6
+    );
+    verdict(
+        &format!("{} vs our JPEG path", v.codec),
+        video_rate / rate(&runs.ours.1),
+        TARGET_VIDEO_JPEG_RATIO,
+        "loader samples/s on the video dataset ÷ on the same frames as JPEG (within 2× = at least 0.5×)",
+    );
+    match &v.lerobot {
+        Ok(r) => verdict(
+            &format!("{} vs LeRobot", v.codec),
+            video_rate / (r.samples as f64 / r.seconds),
+            TARGET_LEROBOT_RATIO,
+            &format!(
+                "samples/s of ours over lerobot {} on the same video files (pyav backend: torchcodec needs FFmpeg libraries on the system), {} workers, {} batches after a warm-up batch of {:.1} s",
+                r.version, runs.threads, args.lerobot_batches, r.warmup_s
+            ),
+        ),
+        Err(why) => println!("LeRobot on video: none, so no ratio — {why}"),
+    }
+    if let Some((r, bytes, how, raw)) = &v.streaming {
+        let rss = r.0.peak_rss;
+        println!(
+            "streaming video: {how} ({:.1} GB of video, {:.1} GB of frames uncompressed), {} episodes open at most; peak RSS {} vs target ≤ {:.1} GB: {}",
+            *bytes as f64 / 1e9,
+            *raw as f64 / 1e9,
+            args.streaming_buffer,
+            rss.map_or("n/a".into(), |b| format!("{:.0} MB", b as f64 / 1e6)),
+            TARGET_STREAMING_RSS as f64 / 1e9,
+            if rss.is_some_and(|b| b <= TARGET_STREAMING_RSS) { "met" } else { "NOT met" }
+        );
+    }
 }
 
 /// Cameras per sample, from the loader's counts.

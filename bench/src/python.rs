@@ -33,6 +33,11 @@ const LEROBOT_BASELINE: Script = Script {
     name: "lerobot_baseline.py",
     text: include_str!("../../tests/py/lerobot_baseline.py"),
 };
+/// `bench load`'s video dataset: image features → LeRobot video features (PyAV).
+pub(crate) const MAKE_VIDEO: Script = Script {
+    name: "make_video_dataset.py",
+    text: include_str!("../../tests/py/make_video_dataset.py"),
+};
 /// `bench load`'s `scaledp_data` route.
 const MODULE_EPOCH: Script = Script {
     name: "scaledp_data_epoch.py",
@@ -208,6 +213,7 @@ pub struct LoadRoute<'a> {
 pub fn run_lerobot(py: &Python, r: &LoadRoute) -> Result<LeRobotRun, NotRun> {
     let mut cmd = py.command(&LEROBOT_BASELINE)?;
     cmd.arg(r.dataset)
+        .args(["--video-backend", "pyav"])
         .args(["--batches", &r.lerobot_batches.to_string()])
         .args(["--batch-size", &r.batch_size.to_string()])
         .args(["--workers", &r.threads.to_string()])

@@ -8,10 +8,10 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use crate::decode::decode_into;
 use crate::error::{Error, Result};
-use crate::loader::Shared;
+use crate::frames::Fetched;
 use crate::sampler::{window, Sample};
+use crate::shared::Shared;
 use crate::stream::{Cache, Open};
 
 /// One batch, contiguous and row-major.
@@ -237,42 +237,32 @@ fn fill(
     }
     // Obs frames are ascending: one read covers them all.
     let (lo, hi) = (w.obs[0], w.obs[w.obs.len() - 1]);
-    let (cols, base) = match open {
-        Some(open) => (
-            open.get(&s.episode).cloned().ok_or_else(|| {
-                Error::Stopped(format!("episode {} was not read", ep.episode_index))
-            })?,
-            0,
-        ),
-        None => (
-            Arc::new(shared.data.read_images(
-                ep.file,
-                ep.first_row + lo..ep.first_row + hi + 1,
-                cams,
-            )?),
-            lo,
+    let fetched: Arc<Vec<Arc<dyn Fetched>>> = match open {
+        Some(open) => open
+            .get(&s.episode)
+            .cloned()
+            .ok_or_else(|| Error::Stopped(format!("episode {} was not read", ep.episode_index)))?,
+        None => Arc::new(
+            shared
+                .sources
+                .iter()
+                .map(|src| src.source.fetch(ep, lo..hi + 1))
+                .collect::<Result<_>>()?,
         ),
     };
     let (width, height) = (shared.info.width, shared.info.height);
-    for (k, &f) in w.obs.iter().enumerate() {
-        for (ci, cam) in cams.iter().enumerate() {
-            let slot = (k * cams.len() + ci) * plane;
-            if k > 0 && w.obs[k - 1] == f {
-                let prev = ((k - 1) * cams.len() + ci) * plane;
-                img.copy_within(prev..prev + plane, slot);
-                continue;
+    // Camera by camera, frames in order: a video decoder goes on from one frame to the next.
+    for (src, got) in shared.sources.iter().zip(fetched.iter()) {
+        for (local, &ci) in src.slots.iter().enumerate() {
+            for (k, &f) in w.obs.iter().enumerate() {
+                let slot = (k * cams.len() + ci) * plane;
+                if k > 0 && w.obs[k - 1] == f {
+                    let prev = ((k - 1) * cams.len() + ci) * plane;
+                    img.copy_within(prev..prev + plane, slot);
+                    continue;
+                }
+                got.decode(local, f, width, height, &mut img[slot..slot + plane])?;
             }
-            let err = |reason: String| Error::Image {
-                path: shared.data.files[ep.file].file.name.clone(),
-                episode: ep.episode_index,
-                frame: f,
-                camera: cam.clone(),
-                reason,
-            };
-            let encoded = cols[ci]
-                .get(f - base)
-                .ok_or_else(|| err("no image (null)".into()))?;
-            decode_into(encoded, width, height, &mut img[slot..slot + plane]).map_err(err)?;
         }
     }
     Ok(())

@@ -76,7 +76,14 @@ fn check_pixels(w: u32, h: u32) -> Result<(), String> {
     Ok(())
 }
 
-fn resize(src: &[u8], w: u32, h: u32, dw: u32, dh: u32, out: &mut Vec<u8>) -> Result<(), String> {
+pub(crate) fn resize(
+    src: &[u8],
+    w: u32,
+    h: u32,
+    dw: u32,
+    dh: u32,
+    out: &mut Vec<u8>,
+) -> Result<(), String> {
     let src =
         fr::images::ImageRef::new(w, h, src, fr::PixelType::U8x3).map_err(|e| e.to_string())?;
     out.resize(dw as usize * dh as usize * 3, 0);
@@ -95,7 +102,7 @@ fn resize(src: &[u8], w: u32, h: u32, dw: u32, dh: u32, out: &mut Vec<u8>) -> Re
 /// ~12 µs. So it is compiled for each and the CPU's best is picked at run time (zune-jpeg
 /// does the same for its IDCT and colour conversion).
 #[multiversion::multiversion(targets("x86_64+avx2", "x86_64+ssse3", "aarch64+neon"))]
-fn to_chw(hwc: &[u8], width: usize, height: usize, dst: &mut [u8]) {
+pub(crate) fn to_chw(hwc: &[u8], width: usize, height: usize, dst: &mut [u8]) {
     let plane = width * height;
     let (r, rest) = dst.split_at_mut(plane);
     let (g, b) = rest.split_at_mut(plane);

@@ -32,10 +32,11 @@ pub enum Error {
     /// The options do not fit the dataset.
     #[error("{0}")]
     Options(String),
-    /// An image in a data file could not be decoded.
+    /// A camera frame (an image in a data file, a frame of a video file) could not be found or
+    /// decoded.
     #[error("{path}: episode {episode} frame {frame} camera {camera}: {reason}")]
     Image {
-        /// The data file.
+        /// The data or video file.
         path: String,
         /// Episode index.
         episode: i64,

@@ -1,35 +1,42 @@
 //! The shuffled action-chunk loader for ScaleDP training: opens a LeRobot v3.0 dataset (what
-//! `scaledp convert` writes, or any v3.0 dataset with image features) from a directory or
+//! `scaledp convert` writes, or any v3.0 dataset with image or video features — AV1 and H.264
+//! in MP4, as LeRobot writes them — or both) from a directory or
 //! S3-compatible storage, and yields contiguous batches — observation windows of To frames
 //! (images `[B, To, cams, 3, H, W]`, normalized state), the next C actions, and
 //! diffusion_policy-style edge padding with `obs_is_pad` / `action_is_pad` masks.
 //!
-//! Only the columns and rows a sample needs are read; JPEGs are decoded on a thread pool
-//! straight into the batch; batches are prepared ahead on a background thread. Orders are
+//! Only the columns and rows a sample needs are read (for video, from the keyframe before a
+//! window to its last frame); frames are decoded on a thread pool straight into the batch; batches are prepared ahead on a background thread. Orders are
 //! seeded per epoch, identical for any thread count, shardable for DDP, and resumable. A
 //! streaming mode reads whole episodes through a bounded buffer for datasets larger than memory.
 
 mod batch;
 mod decode;
+mod episodes;
 mod error;
 mod files;
+mod frames;
 mod loader;
 mod meta;
 mod normalize;
+mod open;
 mod options;
 mod reader;
 mod sampler;
+mod shared;
 mod store;
 mod stream;
+mod video;
 
 pub use batch::Batch;
 pub use error::{Error, Result};
 pub use files::DatasetFiles;
-pub use loader::{DatasetInfo, ImagePool, Loader, LoaderState};
+pub use loader::{Loader, LoaderState};
 pub use meta::Feature;
 pub use normalize::{Affine, Norm, Normalizer};
 pub use options::LoaderOptions;
 pub use sampler::{split_episodes, window, Split, Window};
+pub use shared::{DatasetInfo, ImagePool};
 
 /// An encoded image [`decode_image`] could not decode (corrupt, not JPEG or PNG, claiming
 /// absurd dimensions), or a destination of the wrong size.

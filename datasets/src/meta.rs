@@ -82,7 +82,7 @@ struct InfoJson {
 }
 
 /// A path template of `info.json` must stay inside the dataset: relative, no `..`.
-fn check_template(key: &str, template: &str) -> std::result::Result<(), String> {
+pub(crate) fn check_template(key: &str, template: &str) -> std::result::Result<(), String> {
     let inside = !template.starts_with('/')
         && !template.contains('\\')
         && template.split('/').all(|part| part != "..")
@@ -105,6 +105,8 @@ pub struct Meta {
     pub stats: BTreeMap<String, BTreeMap<String, Vec<f64>>>,
     /// `total_episodes` and `total_frames`, when given: what the data files must hold.
     pub totals: Option<(usize, usize)>,
+    /// `video_path`, the template of video file paths (None: LeRobot's default, or no video).
+    pub video_path: Option<String>,
 }
 
 impl Meta {
@@ -152,6 +154,7 @@ impl Meta {
             features: info.features,
             stats,
             totals: info.total_episodes.zip(info.total_frames),
+            video_path: info.video_path,
         })
     }
 

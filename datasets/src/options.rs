@@ -46,6 +46,8 @@ pub struct LoaderOptions {
     pub(crate) prefetch: usize,
     pub(crate) streaming: Option<usize>,
     pub(crate) skip_bad_samples: usize,
+    pub(crate) video_tolerance_s: f64,
+    pub(crate) video_decoders: usize,
 }
 
 impl Default for LoaderOptions {
@@ -76,6 +78,8 @@ impl Default for LoaderOptions {
             prefetch: 2,
             streaming: None,
             skip_bad_samples: 0,
+            video_tolerance_s: 1e-4,
+            video_decoders: 0,
         }
     }
 }
@@ -208,8 +212,22 @@ impl LoaderOptions {
         self.skip_bad_samples = max;
         self
     }
+    /// Video features: how far (seconds) the frame shown nearest to a row's time may be from it
+    /// (default 1e-4, LeRobot's `tolerance_s`); farther is an error naming the file and frame.
+    pub fn video_tolerance_s(mut self, seconds: f64) -> Self {
+        self.video_tolerance_s = seconds;
+        self
+    }
+    /// Video features: decoders kept between samples, with where they stand in their file, so
+    /// a later frame of the same group of pictures goes on instead of starting again at the
+    /// keyframe (default 0: twice the decoding threads × video cameras, 4 to 256).
+    pub fn video_decoders(mut self, n: usize) -> Self {
+        self.video_decoders = n;
+        self
+    }
     /// Opens the dataset at `location` (a directory or `s3://bucket/prefix`).
     pub fn open(self, location: &str) -> crate::Result<crate::Loader> {
-        crate::loader::Loader::open(location, self)
+        let (shared, bytes_read) = crate::open::open(location, self)?;
+        Ok(crate::Loader::new(shared, bytes_read))
     }
 }

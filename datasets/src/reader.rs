@@ -45,6 +45,9 @@ pub(crate) struct Data {
     pub episodes: Vec<EpisodeRows>,
     pub state: Vec<f32>,
     pub action: Vec<f32>,
+    /// `timestamp` of every frame (same rows as `state`), when every data file has the column:
+    /// video frames are found by it.
+    pub timestamp: Option<Vec<f32>>,
     pub state_dim: usize,
     pub action_dim: usize,
     /// Rows read so far over all files.
@@ -71,6 +74,7 @@ impl Data {
             episodes: Vec::new(),
             state: Vec::new(),
             action: Vec::new(),
+            timestamp: Some(Vec::new()),
             state_dim: 0,
             action_dim: 0,
             rows: 0,
@@ -122,7 +126,14 @@ impl Data {
         let name = &entry.file.name;
         let bad = |e: &dyn std::fmt::Display| Error::format(name.clone(), e);
         let schema = entry.meta.schema().clone();
-        let roots: Vec<usize> = ["episode_index", "frame_index", state_key, action_key]
+        let has_ts = schema.index_of("timestamp").is_ok();
+        let mut keys = vec!["episode_index", "frame_index", state_key, action_key];
+        if has_ts {
+            keys.push("timestamp");
+        } else {
+            self.timestamp = None;
+        }
+        let roots: Vec<usize> = keys
             .iter()
             .map(|k| {
                 schema
@@ -155,6 +166,10 @@ impl Data {
                 .map_err(|e| bad(&format!("{state_key}: {e}")))?;
             let ad = floats(&col(action_key)?, &mut self.action)
                 .map_err(|e| bad(&format!("{action_key}: {e}")))?;
+            if let Some(ts) = self.timestamp.as_mut() {
+                let col = col("timestamp")?;
+                timestamps(&col, ts).map_err(|e| bad(&format!("timestamp: {e}")))?;
+            }
             for (dim, seen) in [(sd, &mut self.state_dim), (ad, &mut self.action_dim)] {
                 if *seen != 0 && *seen != dim {
                     return Err(bad(&format!("vector width {dim}, other files have {seen}")));
@@ -309,6 +324,24 @@ impl ImageColumn {
         }
         None
     }
+}
+
+/// Appends a `timestamp` column (float32, or float64 as some writers store it) to `out`.
+fn timestamps(a: &ArrayRef, out: &mut Vec<f32>) -> std::result::Result<(), String> {
+    if a.null_count() > 0 {
+        return Err("null values".into());
+    }
+    match a.data_type() {
+        DataType::Float32 => out.extend_from_slice(a.as_primitive::<Float32Type>().values()),
+        DataType::Float64 => out.extend(
+            a.as_primitive::<Float64Type>()
+                .values()
+                .iter()
+                .map(|&v| v as f32),
+        ),
+        other => return Err(format!("type {other}, expected float32")),
+    }
+    Ok(())
 }
 
 fn ints(a: &ArrayRef) -> std::result::Result<Vec<i64>, String> {

@@ -328,3 +328,62 @@ impl ChunkReader for DataFile {
         }
     }
 }
+
+/// A [`DataFile`] as `Read + Seek` for parsers that walk a file's boxes (the MP4 index):
+/// reads of at most 64 KiB at a time, fetched where the cursor is, so seeking past a large box
+/// reads none of it.
+pub(crate) struct SeekRead {
+    file: DataFile,
+    pos: u64,
+    buf: Bytes,
+    /// File offset of `buf`'s first byte.
+    buf_at: u64,
+}
+
+impl SeekRead {
+    pub fn new(file: DataFile) -> Self {
+        SeekRead {
+            file,
+            pos: 0,
+            buf: Bytes::new(),
+            buf_at: 0,
+        }
+    }
+}
+
+impl std::io::Read for SeekRead {
+    fn read(&mut self, out: &mut [u8]) -> std::io::Result<usize> {
+        let len = self.file.len();
+        if self.pos >= len || out.is_empty() {
+            return Ok(0);
+        }
+        let inside = self.pos >= self.buf_at && self.pos < self.buf_at + self.buf.len() as u64;
+        if !inside {
+            let n = (len - self.pos).min(64 << 10) as usize;
+            self.buf = self
+                .file
+                .get_bytes(self.pos, n)
+                .map_err(std::io::Error::other)?;
+            self.buf_at = self.pos;
+        }
+        let from = (self.pos - self.buf_at) as usize;
+        let n = out.len().min(self.buf.len() - from);
+        out[..n].copy_from_slice(&self.buf[from..from + n]);
+        self.pos += n as u64;
+        Ok(n)
+    }
+}
+
+impl std::io::Seek for SeekRead {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        let target = match to {
+            std::io::SeekFrom::Start(p) => Some(p),
+            std::io::SeekFrom::End(d) => self.file.len().checked_add_signed(d),
+            std::io::SeekFrom::Current(d) => self.pos.checked_add_signed(d),
+        };
+        self.pos = target.ok_or_else(|| {
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "seek before the start")
+        })?;
+        Ok(self.pos)
+    }
+}

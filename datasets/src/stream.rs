@@ -1,5 +1,6 @@
-//! Streaming mode's image memory: the encoded images of the episodes open in the shuffle buffer
-//! (see [`crate::sampler::streaming_order`]). An episode's image columns are read whole, in
+//! Streaming mode's frame memory: the encoded images or compressed video of the episodes open
+//! in the shuffle buffer
+//! (see [`crate::sampler::streaming_order`]). An episode's frames are read whole, in
 //! parallel with the other episodes a batch opens, when its first sample comes, and dropped
 //! after its last one, so what is resident is bounded by the buffer (plus the episodes a single
 //! batch opens), never by the dataset. The most rows resident at once is counted for tests and
@@ -13,12 +14,15 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::loader::Shared;
-use crate::reader::ImageColumn;
+use crate::frames::Fetched;
 use crate::sampler::Sample;
+use crate::shared::Shared;
 
-/// Images of one open episode, one column per camera.
-pub(crate) type Open = HashMap<u32, Arc<Vec<ImageColumn>>>;
+/// What each frame source read of one open episode (its whole length).
+pub(crate) type Open = HashMap<u32, Arc<Vec<Arc<dyn Fetched>>>>;
+
+/// What the sources read of one episode, or why they could not.
+type Read = Result<Vec<Arc<dyn Fetched>>>;
 
 /// Encoded images of the open episodes.
 pub(crate) struct Cache {
@@ -72,14 +76,17 @@ impl Cache {
             .collect();
         missing.sort_unstable();
         missing.dedup();
-        let cams = &shared.info.cameras;
-        let loaded: Vec<(u32, Result<Vec<ImageColumn>>)> = shared.pool.install(|| {
+        let loaded: Vec<(u32, Read)> = shared.pool.install(|| {
             missing
                 .par_iter()
                 .map(|&e| {
                     let ep = &shared.episodes[e as usize];
-                    let rows = ep.first_row..ep.first_row + ep.len;
-                    (e, shared.data.read_images(ep.file, rows, cams))
+                    let got = shared
+                        .sources
+                        .iter()
+                        .map(|src| src.source.fetch(ep, 0..ep.len))
+                        .collect();
+                    (e, got)
                 })
                 .collect()
         });

@@ -33,7 +33,7 @@ impl Loader {
         image_size=None, drop_first=0, drop_last=0, split="all", val_ratio=0.0, split_seed=0,
         max_episodes=None, state_norm="mean_std", action_norm="min_max", batch_size=64,
         drop_incomplete_batch=false, shuffle=true, seed=0, rank=0, world_size=1, threads=0,
-        prefetch=2, streaming=None,
+        prefetch=2, streaming=None, skip_bad_samples=0, video_tolerance_s=1e-4, video_decoders=0,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -61,6 +61,9 @@ impl Loader {
         threads: usize,
         prefetch: usize,
         streaming: Option<usize>,
+        skip_bad_samples: usize,
+        video_tolerance_s: f64,
+        video_decoders: usize,
     ) -> PyResult<Self> {
         let location = location
             .to_str()
@@ -83,7 +86,10 @@ impl Loader {
             .seed(seed)
             .rank(rank, world_size)
             .threads(threads)
-            .prefetch(prefetch);
+            .prefetch(prefetch)
+            .skip_bad_samples(skip_bad_samples)
+            .video_tolerance_s(video_tolerance_s)
+            .video_decoders(video_decoders);
         if let Some(c) = cameras {
             o = o.cameras(c);
         }

@@ -12,7 +12,8 @@ use scaledp_schema::rig::TopicSpec;
 use zenoh::Wait;
 
 use crate::control::{Command, Label};
-use scaledp_schema::EpisodeMetadata;
+use scaledp_schema::msg::CompressedVideo;
+use scaledp_schema::{EpisodeMetadata, RosMessage};
 
 use crate::episode::EpisodeWriter;
 use crate::error::{Error, Result};
@@ -25,6 +26,11 @@ struct Active {
     start_meta: EpisodeMetadata,
     dropped_at_start: Vec<u64>,
     gaps_at_start: Vec<u64>,
+    /// Per topic: a video topic whose first keyframe has not come yet. Its frames until then
+    /// cannot be decoded (they reference pictures from before the episode) and are not written.
+    awaiting_keyframe: Vec<bool>,
+    /// Per topic: frames left out that way.
+    before_keyframe: Vec<u64>,
 }
 
 pub(crate) struct WriterThread {
@@ -56,6 +62,12 @@ fn next_free_index(dir: &Path) -> u64 {
         }
     }
     next
+}
+
+/// Whether a `CompressedVideo` payload is a keyframe (an unreadable one is written as it is:
+/// the converter reports it).
+fn first_keyframe(payload: &[u8]) -> bool {
+    CompressedVideo::from_cdr(payload).map_or(true, |v| v.is_keyframe())
 }
 
 /// `episode_000042.mcap`.
@@ -94,8 +106,15 @@ impl WriterThread {
                     payload,
                 }) => {
                     self.shared.queued_bytes.fetch_sub(payload.len(), Relaxed);
-                    if self.active.is_some() {
+                    if let Some(a) = self.active.as_mut() {
                         let data = payload.to_bytes();
+                        if a.awaiting_keyframe[topic] {
+                            if !first_keyframe(&data) {
+                                a.before_keyframe[topic] += 1;
+                                continue;
+                            }
+                            a.awaiting_keyframe[topic] = false;
+                        }
                         // publish_time = capture stamp; log_time when the header is unreadable.
                         let publish = scaledp_schema::msg::header_stamp(&data)
                             .map(|t| t.as_ns())
@@ -172,6 +191,12 @@ impl WriterThread {
                     start_meta,
                     dropped_at_start: self.counters(|c| c.dropped.load(Relaxed)),
                     gaps_at_start: self.counters(|c| c.upstream_gaps.load(Relaxed)),
+                    awaiting_keyframe: self
+                        .topics
+                        .iter()
+                        .map(|t| t.message_type == CompressedVideo::TYPE_NAME)
+                        .collect(),
+                    before_keyframe: vec![0; self.topics.len()],
                 });
                 if let Ok(mut a) = self.shared.active.lock() {
                     *a = Some((index, Instant::now()));
@@ -202,6 +227,18 @@ impl WriterThread {
             *a = None;
         }
         let index = active.index;
+        for ((t, &n), &waiting) in self
+            .topics
+            .iter()
+            .zip(&active.before_keyframe)
+            .zip(&active.awaiting_keyframe)
+        {
+            if waiting && n > 0 {
+                tracing::warn!(index, topic = %t.topic, "{n} video frames and no keyframe: nothing of this camera was recorded");
+            } else if n > 0 {
+                tracing::info!(index, topic = %t.topic, "{n} video frames before the first keyframe left out (undecodable)");
+            }
+        }
         let end_ns = now_ns();
         let duration_s = active.started.elapsed().as_secs_f64();
         let per_topic = |now: Vec<u64>, start: &[u64]| -> BTreeMap<String, u64> {

@@ -55,6 +55,11 @@ const DEFS: &[(&str, &str, &[&str])] = &[
         "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n",
         &["std_msgs/Header"],
     ),
+    (
+        "foxglove_msgs/CompressedVideo",
+        "builtin_interfaces/Time timestamp\nstring frame_id\nuint8[] data\nstring format\n",
+        &["builtin_interfaces/Time"],
+    ),
     ("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n", &[]),
     ("geometry_msgs/Quaternion", "float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n", &[]),
     (
@@ -160,7 +165,8 @@ impl RosMessage for Header {
 }
 
 /// Reads only `header.stamp` from a payload whose first field is a `std_msgs/Header`
-/// (Image, CompressedImage, JointState, PoseStamped): cheap enough for every received message.
+/// (Image, CompressedImage, JointState, PoseStamped; also CompressedVideo, whose first field is
+/// its `timestamp`): cheap enough for every received message.
 pub fn header_stamp(payload: &[u8]) -> Result<Time> {
     Time::read(&mut CdrReader::new(payload)?)
 }
@@ -233,6 +239,91 @@ impl RosMessage for CompressedImage {
             data: r.bytes()?.to_vec(),
         })
     }
+}
+
+/// `foxglove_msgs/msg/CompressedVideo` (foxglove schemas; `foxglove.CompressedVideo` over
+/// protobuf): one frame of a compressed video stream. For `h264` / `h265` the data is one
+/// access unit in Annex B (start codes), keyframes carrying their parameter sets, no B-frames;
+/// for `av1` one temporal unit of OBUs.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct CompressedVideo {
+    /// Capture stamp (the first field, as `header.stamp` is elsewhere).
+    pub timestamp: Time,
+    /// Camera frame.
+    pub frame_id: String,
+    /// The compressed frame.
+    pub data: Vec<u8>,
+    /// `h264`, `h265`, `vp9` or `av1`.
+    pub format: String,
+}
+
+impl RosMessage for CompressedVideo {
+    const TYPE_NAME: &'static str = "foxglove_msgs/msg/CompressedVideo";
+    fn write(&self, w: &mut CdrWriter) {
+        self.timestamp.write(w);
+        w.string(&self.frame_id);
+        w.bytes(&self.data);
+        w.string(&self.format);
+    }
+    fn read(r: &mut CdrReader<'_>) -> Result<Self> {
+        Ok(Self {
+            timestamp: Time::read(r)?,
+            frame_id: r.string()?,
+            data: r.bytes()?.to_vec(),
+            format: r.string()?,
+        })
+    }
+}
+
+impl CompressedVideo {
+    /// Whether the frame can be decoded on its own (a decoder may start here): for `h264` an
+    /// IDR slice (NAL type 5), for `h265` an IRAP picture (NAL types 16-23), for `av1` a
+    /// temporal unit carrying a sequence header (OBU type 1). Unknown formats: false.
+    pub fn is_keyframe(&self) -> bool {
+        is_keyframe(&self.format, &self.data)
+    }
+}
+
+/// [`CompressedVideo::is_keyframe`] on a frame's `format` and `data`.
+pub fn is_keyframe(format: &str, data: &[u8]) -> bool {
+    match format {
+        "h264" => annex_b_nal_types(data).any(|h| h & 0x1F == 5),
+        "h265" => annex_b_nal_types(data).any(|h| (16..=23).contains(&((h >> 1) & 0x3F))),
+        "av1" => av1_obu_types(data).any(|t| t == 1),
+        _ => false,
+    }
+}
+
+/// The first byte of every NAL unit of an Annex B stream (after 3- or 4-byte start codes).
+fn annex_b_nal_types(data: &[u8]) -> impl Iterator<Item = u8> + '_ {
+    data.windows(4)
+        .filter(|w| w[..3] == [0, 0, 1])
+        .map(|w| w[3])
+}
+
+/// OBU types of a low-overhead AV1 temporal unit (every OBU with its size field).
+fn av1_obu_types(data: &[u8]) -> impl Iterator<Item = u8> + '_ {
+    let mut at = 0usize;
+    std::iter::from_fn(move || {
+        let h = *data.get(at)?;
+        let kind = (h >> 3) & 0x0F;
+        let mut p = at + 1 + usize::from((h >> 2) & 1);
+        if (h >> 1) & 1 == 0 {
+            at = data.len();
+            return Some(kind);
+        }
+        let mut size = 0usize;
+        for i in 0..8 {
+            let b = *data.get(p)?;
+            p += 1;
+            size |= usize::from(b & 0x7F) << (7 * i);
+            if b & 0x80 == 0 {
+                break;
+            }
+        }
+        at = p.checked_add(size)?;
+        Some(kind)
+    })
 }
 
 /// `sensor_msgs/msg/JointState`. Arrays are parallel to `name`; map joints by name, not index.

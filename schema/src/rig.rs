@@ -180,7 +180,9 @@ pub struct Camera {
     pub height: u32,
     /// Frame rate (Hz).
     pub fps: f64,
-    /// Pixel encoding; the model's default when absent.
+    /// Pixel encoding of raw images (`bgra8`, `rgb8`, …; the model's default when absent), or
+    /// the codec of a compressed video stream (`h264`, `h265`, `av1`): the topic then carries
+    /// `foxglove_msgs/msg/CompressedVideo`.
     pub encoding: Option<String>,
     /// True when the topic carries `sensor_msgs/CompressedImage`.
     #[serde(default)]
@@ -194,15 +196,26 @@ impl Camera {
             .as_deref()
             .unwrap_or(self.model.default_encoding())
     }
+    /// The video codec when the topic carries `foxglove_msgs/msg/CompressedVideo`.
+    pub fn video_codec(&self) -> Option<&str> {
+        self.encoding
+            .as_deref()
+            .filter(|e| VIDEO_CODECS.contains(e))
+    }
     /// The ROS 2 message type on the topic.
     pub fn message_type(&self) -> &'static str {
         if self.compressed {
             "sensor_msgs/msg/CompressedImage"
+        } else if self.video_codec().is_some() {
+            "foxglove_msgs/msg/CompressedVideo"
         } else {
             "sensor_msgs/msg/Image"
         }
     }
 }
+
+/// Codecs of `foxglove_msgs/msg/CompressedVideo` camera topics (a camera's `encoding`).
+pub const VIDEO_CODECS: &[&str] = &["h264", "h265", "av1"];
 
 /// One topic a rig publishes, with its type and nominal rate.
 #[derive(Debug, Clone, PartialEq)]
@@ -381,6 +394,13 @@ impl Rig {
                     cam.name
                 ));
             }
+            if cam.compressed && cam.video_codec().is_some() {
+                return Err(format!(
+                    "camera '{}': compressed (JPEG/PNG images) and a video encoding ({}) at once",
+                    cam.name,
+                    cam.encoding()
+                ));
+            }
             names.push(("camera", cam.name.as_str()));
         }
         for (i, (kind, name)) in names.iter().enumerate() {
@@ -420,6 +440,49 @@ mod tests {
         let ur = Rig::builtin("bimanual_ur5_3rs").unwrap();
         assert_eq!((ur.arms.len(), ur.cameras.len()), (2, 3));
         assert_eq!(ur.cameras[0].encoding(), "rgb8");
+    }
+
+    #[test]
+    fn video_cameras_carry_compressed_video() {
+        use crate::msg::{CompressedVideo, Time};
+        use crate::RosMessage;
+        let text = include_str!("../../rigs/franka_sim.toml").replacen(
+            "fps = 30.0",
+            "fps = 30.0\nencoding = \"h264\"",
+            1,
+        );
+        let rig = Rig::parse(&text, Path::new("h264.toml")).unwrap();
+        assert_eq!(rig.cameras[0].video_codec(), Some("h264"));
+        assert_eq!(
+            rig.cameras[0].message_type(),
+            "foxglove_msgs/msg/CompressedVideo"
+        );
+        assert_eq!(rig.cameras[1].message_type(), "sensor_msgs/msg/Image");
+        let both = text.replacen(
+            "encoding = \"h264\"",
+            "encoding = \"h264\"\ncompressed = true",
+            1,
+        );
+        let e = Rig::parse(&both, Path::new("both.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("camera 'front'") && e.contains("h264"), "{e}");
+        // The message: its stamp reads like a header's, and it survives a round trip.
+        let m = CompressedVideo {
+            timestamp: Time { sec: 3, nanosec: 7 },
+            frame_id: "front".into(),
+            data: vec![0, 0, 0, 1, 0x67],
+            format: "h264".into(),
+        };
+        let cdr = m.to_cdr();
+        assert_eq!(CompressedVideo::from_cdr(&cdr).unwrap(), m);
+        assert_eq!(crate::msg::header_stamp(&cdr).unwrap(), m.timestamp);
+        let def = CompressedVideo::definition();
+        assert!(
+            def.starts_with("builtin_interfaces/Time timestamp\nstring frame_id"),
+            "{def}"
+        );
+        assert!(def.contains("MSG: builtin_interfaces/Time"), "{def}");
     }
 
     #[test]

@@ -35,6 +35,9 @@ pub enum Error {
         /// What the TOML serializer said.
         source: toml::ser::Error,
     },
+    /// A camera's video encoder could not be made.
+    #[error("{0}")]
+    Video(String),
     /// Writing an episode failed.
     #[error(transparent)]
     Recorder(#[from] scaledp_recorder::Error),

@@ -33,6 +33,7 @@ pub mod scene;
 mod streams;
 pub mod synth;
 pub mod task;
+mod video;
 pub mod world;
 
 pub use error::{Error, Result};

@@ -214,7 +214,7 @@ impl SimOptions {
             .map_err(zerr(&status_key))?;
 
         let mut threads = Vec::new();
-        for (n, stream) in crate::streams::streams(&shared, self.frame_cache, self.seed)
+        for (n, stream) in crate::streams::streams(&shared, self.frame_cache, self.seed)?
             .into_iter()
             .enumerate()
         {

@@ -21,6 +21,7 @@ use crate::headless::OfflineRun;
 use crate::messages;
 use crate::render::{self, View};
 use crate::runtime::{PublishHook, Shared};
+use crate::video::{raw_encoding, video_message, VideoEncoder};
 
 /// What a stream publishes.
 // One value per stream thread: the size difference between variants costs nothing.
@@ -30,6 +31,8 @@ pub(crate) enum Kind {
         view: View,
         cam: Camera,
         cache: Vec<Vec<u8>>,
+        /// For a camera publishing compressed video.
+        encoder: Option<VideoEncoder>,
     },
     Arm {
         index: usize,
@@ -61,7 +64,11 @@ pub(crate) struct StreamCtx {
 }
 
 /// The rig's streams, cameras first, in `Rig::topics` order (command topics excluded).
-pub(crate) fn streams(shared: &Shared, frame_cache: usize, seed: u64) -> Vec<Stream> {
+pub(crate) fn streams(
+    shared: &Shared,
+    frame_cache: usize,
+    seed: u64,
+) -> crate::Result<Vec<Stream>> {
     let scene = shared.scene.clone();
     let rig = &shared.rig;
     let mut out = Vec::new();
@@ -78,7 +85,7 @@ pub(crate) fn streams(shared: &Shared, frame_cache: usize, seed: u64) -> Vec<Str
                     &scene,
                     &view,
                     &run.world().state(),
-                    cam.encoding(),
+                    raw_encoding(cam),
                     &mut buf,
                 );
                 cache.push(buf);
@@ -99,6 +106,10 @@ pub(crate) fn streams(shared: &Shared, frame_cache: usize, seed: u64) -> Vec<Str
                 view,
                 cam: cam.clone(),
                 cache,
+                encoder: match cam.video_codec() {
+                    Some(_) => Some(VideoEncoder::new(cam).map_err(crate::Error::Video)?),
+                    None => None,
+                },
             },
         });
     }
@@ -128,7 +139,7 @@ pub(crate) fn streams(shared: &Shared, frame_cache: usize, seed: u64) -> Vec<Str
             });
         }
     }
-    out
+    Ok(out)
 }
 
 fn sleep_until(ns: u64) {
@@ -141,7 +152,7 @@ fn sleep_until(ns: u64) {
 impl Stream {
     /// Publishes until the simulation stops; returns (topic, messages published).
     pub(crate) fn run(
-        self,
+        mut self,
         mut ctx: StreamCtx,
         publisher: zenoh::pubsub::Publisher<'static>,
     ) -> (String, u64) {
@@ -187,20 +198,28 @@ impl Stream {
     }
 
     fn message(
-        &self,
+        &mut self,
         shared: &Shared,
         k: u64,
         capture_ns: u64,
         image_buf: &mut Vec<u8>,
     ) -> Vec<u8> {
-        match &self.kind {
-            Kind::Camera { view, cam, cache } => {
+        match &mut self.kind {
+            Kind::Camera {
+                view,
+                cam,
+                cache,
+                encoder,
+            } => {
                 if cache.is_empty() {
                     let state = shared.state();
-                    render::render(&shared.scene, view, &state, cam.encoding(), image_buf);
+                    render::render(&shared.scene, view, &state, raw_encoding(cam), image_buf);
                 } else {
                     image_buf.clear();
                     image_buf.extend_from_slice(&cache[k as usize % cache.len()]);
+                }
+                if let Some(enc) = encoder {
+                    return video_message(cam, enc, image_buf, capture_ns);
                 }
                 let image = messages::image(cam, std::mem::take(image_buf), capture_ns);
                 let out = image.to_cdr();

@@ -147,6 +147,7 @@ pub fn write_episode(
     let mut counts = vec![0u64; topics.len()];
     let mut cmd_rng = ChaCha8Rng::seed_from_u64(seed ^ 0xC0_3A4D);
     let mut buf = Vec::new();
+    let mut encoders = crate::video::encoders(&rig.cameras)?;
     let mut write_due = |heap: &mut BinaryHeap<Pending>, upto: u64| -> Result<()> {
         while heap.peek().is_some_and(|Reverse(p)| p.0 <= upto) {
             let Some(Reverse((log, ti, k, mut stamp, mut payload))) = heap.pop() else {
@@ -198,12 +199,17 @@ pub fn write_episode(
             Source::Camera(i) => {
                 let cam = &rig.cameras[i];
                 if let Some(view) = &views[ti] {
-                    render::render(&scene, view, &state, cam.encoding(), &mut buf);
+                    let raw = crate::video::raw_encoding(cam);
+                    render::render(&scene, view, &state, raw, &mut buf);
                 }
-                let img = messages::image(cam, std::mem::take(&mut buf), stamp);
-                let out = img.to_cdr();
-                buf = img.data;
-                out
+                if let Some(enc) = &mut encoders[i] {
+                    crate::video::video_message(cam, enc, &buf, stamp)
+                } else {
+                    let img = messages::image(cam, std::mem::take(&mut buf), stamp);
+                    let out = img.to_cdr();
+                    buf = img.data;
+                    out
+                }
             }
             Source::Joints(a) => {
                 messages::joint_state(&rig.arms[a], &state.arms[a], stamp).to_cdr()

@@ -27,7 +27,8 @@ pub const TEST_VENV: Venv = Venv {
     provides: "rosbags, mcap, pyarrow, Pillow and moto",
 };
 
-/// `.venv-bench`: LeRobot and torch, for the benchmarks only (several GB, never the tests).
+/// `.venv-bench`: LeRobot and torch (several GB), for the benchmarks and the LeRobot video
+/// conformance tests.
 pub const BENCH_VENV: Venv = Venv {
     dir: ".venv-bench",
     env: "SCALEDP_BENCH_PYTHON",

@@ -1,7 +1,7 @@
 """The LeRobot route for `scaledp bench load`: LeRobotDataset with the same observation window
 (To = 2) and action chunk (C = 16) as our loader, iterated by a shuffled torch DataLoader.
 
-Usage: lerobot_baseline.py DATASET [--batches N] [--batch-size B] [--workers W]
+Usage: lerobot_baseline.py DATASET [--batches N] [--batch-size B] [--workers W] [--video-backend pyav]
 Prints progress on stderr and one JSON line on stdout:
 {"lerobot": VERSION, "samples": N, "seconds": S, "init_seconds": S, "warmup_seconds": S, "shapes": {...}}
 where seconds covers the N timed batches after one warm-up batch (worker start-up and the
@@ -23,6 +23,9 @@ def main():
     p.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     p.add_argument("--obs-horizon", type=int, default=2)
     p.add_argument("--action-chunk", type=int, default=16)
+    # torchcodec, LeRobot's default, needs FFmpeg libraries installed on the system; PyAV's
+    # wheel brings its own.
+    p.add_argument("--video-backend", default="pyav")
     a = p.parse_args()
 
     import torch
@@ -37,7 +40,7 @@ def main():
     delta = {cam: obs for cam in cams}
     delta["observation.state"] = obs
     delta["action"] = [k / fps for k in range(a.action_chunk)]
-    ds = LeRobotDataset("scaledp/bench", root=root, delta_timestamps=delta)
+    ds = LeRobotDataset("scaledp/bench", root=root, delta_timestamps=delta, video_backend=a.video_backend)
     init_s = time.perf_counter() - t0
     print(f"LeRobotDataset: {len(ds)} frames, {ds.num_episodes} episodes, cameras {cams}, opened in {init_s:.1f} s",
           file=sys.stderr)

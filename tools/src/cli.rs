@@ -101,6 +101,24 @@ pub struct NetArgs {
     pub listen: Vec<String>,
 }
 
+/// The codec of simulated cameras (`sim --camera-codec`, `collect --camera-codec`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CameraCodecArg {
+    /// Each camera as `foxglove_msgs/msg/CompressedVideo`: H.264 Annex B, no B-frames, an IDR
+    /// with SPS/PPS once a second.
+    H264,
+}
+
+impl CameraCodecArg {
+    /// Makes every camera of `rig` publish (and be recorded) as this codec.
+    pub fn apply(self, rig: &mut scaledp_schema::Rig) {
+        for c in &mut rig.cameras {
+            c.encoding = Some("h264".into());
+            c.compressed = false;
+        }
+    }
+}
+
 /// Key layout of the simulated publishers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum KeysArg {
@@ -126,6 +144,10 @@ pub struct SimArgs {
     /// simulated task cells with command topics, franka_sim, bimanual_ur5_sim).
     #[arg(long, default_value = "franka_2zed")]
     pub rig: String,
+    /// Publish the cameras as compressed video (default: the rig's own, raw images unless it
+    /// says otherwise).
+    #[arg(long, value_enum, value_name = "CODEC")]
+    pub camera_codec: Option<CameraCodecArg>,
     /// Seed of the first episode (cubes, targets, the operator's hands) and of the jitter and
     /// latencies; episode i uses seed + i.
     #[arg(long, default_value_t = 0)]
@@ -175,6 +197,9 @@ pub struct CollectArgs {
     /// topics, so the commands are recorded too).
     #[arg(long, default_value = "franka_sim")]
     pub rig: String,
+    /// Publish and record the cameras as compressed video (default: as the rig says).
+    #[arg(long, value_enum, value_name = "CODEC")]
+    pub camera_codec: Option<CameraCodecArg>,
     /// Episodes to collect.
     #[arg(long, default_value_t = 100)]
     pub episodes: u64,

@@ -7,6 +7,8 @@
 //! cross episodes, `List<f32>` vectors, or no page index.
 #![allow(dead_code, clippy::unwrap_used)]
 
+pub mod video;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -53,6 +53,9 @@ class Loader:
         threads: int = 0,
         prefetch: int = 2,
         streaming: Optional[int] = None,
+        skip_bad_samples: int = 0,
+        video_tolerance_s: float = 1e-4,
+        video_decoders: int = 0,
     ) -> None: ...
     def __len__(self) -> int: ...
     def __iter__(self) -> Iterator[Dict[str, np.ndarray]]: ...

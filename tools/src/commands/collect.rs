@@ -65,7 +65,10 @@ fn default_task(arms: usize) -> &'static str {
 }
 
 pub fn run(args: CollectArgs) -> Result<ExitStatus> {
-    let rig = Rig::load_or_builtin(&args.rig)?;
+    let mut rig = Rig::load_or_builtin(&args.rig)?;
+    if let Some(codec) = args.camera_codec {
+        codec.apply(&mut rig);
+    }
     if rig.command_topics().is_empty() {
         tracing::warn!(
             "rig {} has no command topics: actions will be the next measured state",

@@ -13,7 +13,10 @@ use super::collect::{wilson_interval, Tally};
 use crate::cli::{ExitStatus, KeysArg, OperatorArg, SimArgs};
 
 pub fn run(args: SimArgs) -> Result<ExitStatus> {
-    let rig = Rig::load_or_builtin(&args.rig)?;
+    let mut rig = Rig::load_or_builtin(&args.rig)?;
+    if let Some(codec) = args.camera_codec {
+        codec.apply(&mut rig);
+    }
     let scripted = args.operator == OperatorArg::Scripted;
     if args.score {
         anyhow::ensure!(
