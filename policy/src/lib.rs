@@ -84,6 +84,7 @@ mod error;
 mod image_chain;
 mod inference;
 pub mod model;
+pub mod parity;
 mod predict;
 mod scheduler;
 mod trainer;
