@@ -61,7 +61,7 @@ fn args<'a>(ds: &'a str, out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
 }
 
 /// The single-process run and the uninterrupted 2-rank run (made once, shared by the tests).
-fn reference_runs() -> &'static (PathBuf, PathBuf) {
+pub fn reference_runs() -> &'static (PathBuf, PathBuf) {
     static RUNS: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     RUNS.get_or_init(|| {
         let f = fixture();
