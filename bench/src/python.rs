@@ -5,8 +5,9 @@
 //! for `bench load`, LeRobot's `LeRobotDataset` + torch `DataLoader` (`lerobot_baseline.py`)
 //! and our own loader through its Python module `scaledp_data` (`scaledp_data_epoch.py`, with
 //! the wheel `scripts/build-python.sh` builds unpacked onto `PYTHONPATH`), both on the
-//! benchmark Python; for `bench train`, the reference PyTorch ScaleDP module's training step
-//! (`bench_train_torch.py` + `scaledp_torch.py`) on the benchmark Python. The interpreter: `--python`, else the venv's variable, else the venv in the
+//! benchmark Python; for `bench train`, the training step of the wheel's PyTorch ScaleDP module
+//! (`bench_train_torch.py` with `scaledp_data.policy` from the unpacked wheel) on the benchmark
+//! Python. The interpreter: `--python`, else the venv's variable, else the venv in the
 //! workspace found from the current directory upward (`scaledp_testkit::Venv`). A route that
 //! cannot run says why ([`NotRun`]); the benchmark prints that instead of a figure.
 

@@ -1,8 +1,9 @@
 //! `scaledp bench train`: ScaleDP-Ti training throughput on this machine's cores — on a dataset
 //! converted from simulated recordings (2 cameras, images as the converter writes them unless
 //! `--image-size`, cropped to 0.9), To 2, C 16, batch 64 — with the share of step time spent
-//! waiting for the loader; the same model in PyTorch from the same initial weights on the same
-//! threads (when the benchmark venv has torch); and DDIM-10 latency per action chunk for Ti and S.
+//! waiting for the loader; the same model in PyTorch (the wheel's `scaledp_data.policy`) from the
+//! same initial weights on the same threads (when the benchmark venv has torch); and DDIM-10
+//! latency per action chunk for Ti and S.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -20,15 +21,10 @@ use crate::python::{NotRun, Python, Script};
 use crate::synth::synthesize;
 use crate::Outcome;
 
-/// The PyTorch side: times the reference module's training step.
+/// The PyTorch side: times the wheel's module's training step.
 const TORCH_TRAIN: Script = Script {
     name: "bench_train_torch.py",
     text: include_str!("../../tests/py/bench_train_torch.py"),
-};
-/// The reference module `bench_train_torch.py` imports from beside itself.
-const TORCH_MODULE: Script = Script {
-    name: "scaledp_torch.py",
-    text: include_str!("../../tests/py/scaledp_torch.py"),
 };
 
 /// Runs `scaledp bench train`.
@@ -152,9 +148,12 @@ fn torch_route(
     let py = Python::locate(&BENCH_VENV, args.python.as_deref())?;
     let (config, weights) = write_torch_case(&work.join("torch-case"), cfg, 0)
         .map_err(|e| NotRun::Failed(e.to_string()))?;
-    py.install(&TORCH_MODULE)?;
+    // The PyTorch module is the wheel's (scripts/build-python.sh), unpacked onto PYTHONPATH.
+    let site = work.join("py-site");
+    py.unpack_wheel(&site)?;
     let mut cmd = py.command(&TORCH_TRAIN)?;
-    cmd.arg(config)
+    cmd.env("PYTHONPATH", &site)
+        .arg(config)
         .arg(weights)
         .args(["--batch", &args.batch_size.to_string()])
         .args(["--steps", &(args.steps + 1).to_string()])

@@ -50,9 +50,9 @@
 //! `layer{1..4}.{0,1}.{conv1,bn1,conv2,bn2}`, `layer{2..4}.0.downsample.{0,1}`; the GroupNorms
 //! keep the BatchNorms' names), `obs_encoder.<camera>.pool.nets.*` (keypoint 1×1 conv) and
 //! `obs_encoder.<camera>.linear.*`, where `<camera>` is the key without `observation.images.`
-//! (dots as underscores). `tests/py/scaledp_torch.py` holds the PyTorch module that loads it with
-//! `load_state_dict(strict=True)`; `tests/py/scaledp_reference.py` an independent numpy forward
-//! pass the tests compare against.
+//! (dots as underscores). `scaledp_data.policy` (the wheel, `python/`) holds the PyTorch module
+//! that loads it with `load_state_dict(strict=True)`; `tests/py/scaledp_reference.py` an
+//! independent numpy forward pass the tests compare against.
 //!
 //! # Diffusion and training
 //!
@@ -84,6 +84,7 @@ mod error;
 mod image_chain;
 mod inference;
 pub mod model;
+pub mod parity;
 mod predict;
 mod scheduler;
 mod trainer;

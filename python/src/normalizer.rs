@@ -85,6 +85,31 @@ impl Normalizer {
         self.inner.action.dim()
     }
 
+    /// Per-dimension scale of the state: `normalized = raw · scale + offset` (float64, the
+    /// numbers a checkpoint's `config.json` records).
+    #[getter]
+    fn state_scale(&self) -> Vec<f64> {
+        self.inner.state.scale().to_vec()
+    }
+
+    /// Per-dimension offset of the state.
+    #[getter]
+    fn state_offset(&self) -> Vec<f64> {
+        self.inner.state.offset().to_vec()
+    }
+
+    /// Per-dimension scale of the actions.
+    #[getter]
+    fn action_scale(&self) -> Vec<f64> {
+        self.inner.action.scale().to_vec()
+    }
+
+    /// Per-dimension offset of the actions.
+    #[getter]
+    fn action_offset(&self) -> Vec<f64> {
+        self.inner.action.offset().to_vec()
+    }
+
     /// `"min_max"`, `"mean_std"` or `"none"`.
     #[getter]
     fn state_norm(&self) -> &'static str {

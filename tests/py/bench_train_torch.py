@@ -1,40 +1,38 @@
-"""PyTorch side of the training benchmark: the same ScaleDP model (tests/py/scaledp_torch.py),
-from the same initial weights, timed on the same number of threads.
+"""PyTorch side of the training benchmark: the wheel's ScaleDP module (scaledp_data.policy, the
+one PyTorch definition), from the same initial weights, timed on the same number of threads.
 
-    python bench_train_torch.py CONFIG.json WEIGHTS.safetensors --batch 64 --steps 5 --threads 2
+    PYTHONPATH=<unpacked wheel> python bench_train_torch.py CONFIG.json WEIGHTS.safetensors \
+        --batch 64 --steps 5 --threads 2
 
-CONFIG.json is a checkpoint-style config (`{"model": {...}}`). Each step: random crop of
-uint8 images, masked ε-MSE at random timesteps of the cosine schedule, backward, AdamW
-(lr 1e-4, betas 0.9/0.95, weight decay 1e-3 on weight matrices). The batch is synthetic (data
-loading is measured on the Rust side). Prints one JSON line: per-step seconds (the first step,
-which allocates, is reported apart) and samples/s. Without torch it prints
-`{"error": "torch not installed"}`.
+CONFIG.json is a checkpoint-style config (`{"model": {...}}`). Each step is the trainer's
+(scaledp_data.policy.trainer): random crops of the uint8 images, the epsilon-MSE at random
+timesteps of the cosine schedule over every action step, backward, AdamW (lr 1e-4, betas
+0.9/0.95, the Rust trainer's parameter groups: 1e-3 on the denoiser's Linear weights, 1e-6 on
+every encoder tensor). The batch is synthetic (data loading is measured on the Rust side).
+Prints one JSON line: per-step seconds (the first step, which allocates, is reported apart) and
+samples/s. Without torch, or without the module, it prints `{"error": "..."}`.
 """
 
 import argparse
 import json
-import math
 import os
 import sys
 import time
 
 try:
     import torch
-except ImportError:
-    print(json.dumps({"error": "torch not installed"}))
+    from safetensors.torch import load_file
+
+    from scaledp_data.policy import DenoisingLoss, Draws, NoiseScheduler, ScaleDPPolicy
+    from scaledp_data.policy.options import default_options
+    from scaledp_data.policy.trainer import param_groups
+except ImportError as e:
+    print(json.dumps({"error": f"{e.name or e} not installed"}))
     sys.exit(0)
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from scaledp_torch import ScaleDPPolicy  # noqa: E402
-
-
-def alphas_cumprod(n=100):
-    ab = lambda t: math.cos((t + 0.008) / 1.008 * math.pi / 2) ** 2
-    betas = torch.tensor([min(1 - ab((i + 1) / n) / ab(i / n), 0.999) for i in range(n)], dtype=torch.float32)
-    return torch.cumprod(1.0 - betas, dim=0)
 
 
 def main():
+    """Times the steps and prints the report."""
     ap = argparse.ArgumentParser()
     ap.add_argument("config")
     ap.add_argument("weights")
@@ -43,34 +41,26 @@ def main():
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    torch.manual_seed(0)
-    from safetensors.torch import load_file
-
-    cfg = json.load(open(args.config))["model"]
+    with open(args.config) as f:
+        cfg = json.load(f)["model"]
     policy = ScaleDPPolicy(cfg)
     policy.load_state_dict(load_file(args.weights), strict=True)
-    decay = [p for n, p in policy.named_parameters() if p.dim() >= 2 and n != "pos_embed"]
-    no_decay = [p for n, p in policy.named_parameters() if not (p.dim() >= 2 and n != "pos_embed")]
-    opt = torch.optim.AdamW(
-        [{"params": decay, "weight_decay": 1e-3}, {"params": no_decay, "weight_decay": 0.0}],
-        lr=1e-4,
-        betas=(0.9, 0.95),
-    )
+    o = default_options()
+    opt = torch.optim.AdamW(param_groups(policy, o), lr=1e-4, betas=(0.9, 0.95), eps=1e-8)
+    sched = NoiseScheduler(100)
+    loss_fn = DenoisingLoss(policy, sched)
+    g = torch.Generator().manual_seed(0)
     b, to, c, a = args.batch, cfg["obs_horizon"], cfg["action_chunk"], cfg["action_dim"]
     cams, h, w = len(cfg["cameras"]), cfg["image_height"], cfg["image_width"]
-    images = torch.randint(0, 256, (b, to, cams, 3, h, w), dtype=torch.uint8)
-    state = torch.randn(b, to, cfg["state_dim"])
-    action = torch.rand(b, c, a) * 2 - 1
-    ab = alphas_cumprod()
+    images = torch.randint(0, 256, (b, to, cams, 3, h, w), dtype=torch.uint8, generator=g)
+    state = torch.rand((b, to, cfg["state_dim"]), generator=g) * 2 - 1
+    action = torch.rand((b, c, a), generator=g) * 2 - 1
+    pad = torch.zeros((b, c), dtype=torch.bool)
     times = []
     for _ in range(args.steps + 1):
         t0 = time.perf_counter()
-        cond = policy.encode(images, state, train=True)
-        t = torch.randint(0, 100, (b,))
-        noise = torch.randn_like(action)
-        s = ab[t][:, None, None]
-        noisy = s.sqrt() * action + (1 - s).sqrt() * noise
-        loss = F_mse(policy(noisy, t, cond), noise)
+        d = Draws.random(cfg, b, 1, sched.train_steps, g)
+        loss = loss_fn(images, state, action, pad, d.crops, d.timesteps, d.noise) / (b * c * a)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -85,10 +75,6 @@ def main():
         "threads": args.threads,
         "torch": torch.__version__,
     }))
-
-
-def F_mse(pred, target):
-    return ((pred - target) ** 2).mean()
 
 
 if __name__ == "__main__":

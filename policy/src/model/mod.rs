@@ -1,6 +1,6 @@
 //! The ScaleDP network: one image encoder per camera and the DiT denoiser, built under PyTorch
 //! state-dict names so a checkpoint loads 1:1 into the reference module
-//! (`tests/py/scaledp_torch.py`).
+//! (`scaledp_data.policy` in the wheel, `python/`).
 
 pub(crate) mod conv;
 pub(crate) mod cpu;

@@ -114,7 +114,7 @@ impl std::fmt::Debug for Trainer {
 }
 
 /// The generator of step `step`'s draws.
-fn step_rng(seed: u64, step: u64) -> ChaCha8Rng {
+pub(crate) fn step_rng(seed: u64, step: u64) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);
     r.set_stream(step);
     r

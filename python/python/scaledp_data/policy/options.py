@@ -1,0 +1,180 @@
+"""Training options: the flags of ``scaledp train`` with the same names, meanings and defaults,
+and the options object a checkpoint stores under ``config.json``'s ``train`` -- the Rust
+``TrainOptions`` serialized field by field, so either trainer resumes the other's runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any, Dict, Optional, Tuple
+
+__all__ = ["MODEL_SIZES", "add_arguments", "default_options", "options_from_args", "cosine_lr",
+           "ema_decay"]
+
+#: The paper's sizes: depth, width, heads.
+MODEL_SIZES = {"ti": (8, 256, 4), "s": (12, 384, 6), "b": (12, 768, 12), "l": (24, 1024, 16),
+               "h": (32, 1280, 16)}
+
+
+def default_options() -> Dict[str, Any]:
+    """``TrainOptions::default()``: every default is the paper's / diffusion_policy's."""
+    return {
+        "size": "ti", "denoiser": None, "resnet_width": 64, "steps": 10_000, "batch_size": 64,
+        "micro_batch": None, "lr": 1e-4, "warmup_steps": 500,
+        "adamw": {"beta1": 0.9, "beta2": 0.95, "eps": 1e-8, "weight_decay": 1e-3,
+                  "encoder_weight_decay": 1e-6},
+        "ema": {"inv_gamma": 1.0, "power": 0.75, "min_value": 0.0, "max_value": 0.9999,
+                "update_after_step": 0},
+        "grad_clip": None, "seed": 0, "checkpoint_every": 1000, "val_every": 1000,
+        "val_ratio": 0.05, "val_batches": 4, "obs_horizon": 2, "action_chunk": 16,
+        "cameras": None, "image_size": None, "crop": 0.9, "loader_threads": 0,
+        "max_episodes": None, "loss": {"noise_samples": 1, "mask_padding": False},
+        "state_norm": "min_max", "image_range": "symmetric", "attention": "non_causal",
+    }
+
+
+def _size(s: str) -> Tuple[int, int]:
+    try:
+        w, h = s.split("x")
+        return int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--image-size {s}: WxH, e.g. 84x84") from None
+
+
+def _triple(s: str) -> Tuple[int, int, int]:
+    try:
+        d, w, h = (int(v) for v in s.split(","))
+        return d, w, h
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--denoiser {s}: DEPTH,WIDTH,HEADS, e.g. 2,64,4") from None
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags of ``scaledp train`` (tools/src/commands/train.rs), same names and defaults."""
+    p.add_argument("dataset", nargs="?", help="the dataset: a directory or s3://bucket/prefix "
+                   "(not needed with --resume)")
+    p.add_argument("--model", default="ti", help="model size: ti, s, b, l or h")
+    p.add_argument("--out", metavar="DIR", help="run directory (metrics.jsonl, checkpoints/step_*)")
+    p.add_argument("--resume", metavar="DIR", help="continue the run in this directory from its "
+                   "latest checkpoint")
+    p.add_argument("--steps", type=int, help="optimizer steps in total (default 10000)")
+    p.add_argument("--batch-size", type=int, default=64,
+                   help="samples per step: the global batch, split evenly over the ranks")
+    p.add_argument("--micro-batch", type=int, help="forward/backward at most this many samples "
+                   "at a time per rank (same update, less memory)")
+    p.add_argument("--lr", type=float, default=1e-4, help="peak learning rate")
+    p.add_argument("--warmup-steps", type=int, default=500, help="warm-up steps")
+    p.add_argument("--seed", type=int, default=0, help="seed of the weights, data order, crops "
+                   "and noise")
+    p.add_argument("--device", default="auto", help="cpu, cuda or auto (default: cuda when "
+                   "available: NCCL across the ranks, else the CPU and gloo)")
+    p.add_argument("--checkpoint-every", type=int, default=1000, help="checkpoint every N steps "
+                   "(and at the end)")
+    p.add_argument("--val-every", type=int, default=1000, help="validate every N steps (0: never)")
+    p.add_argument("--val-ratio", type=float, default=0.05, help="fraction of episodes held out "
+                   "for validation")
+    p.add_argument("--grad-clip", type=float, help="clip the global gradient norm")
+    p.add_argument("--crop", type=float, default=0.9, help="crop side / image side (random in "
+                   "training, centred in inference)")
+    p.add_argument("--obs-horizon", type=int, default=2, help="observation frames per sample, To")
+    p.add_argument("--action-chunk", type=int, default=16, help="actions per chunk, C")
+    p.add_argument("--image-size", type=_size, metavar="WxH", help="resize images to WxH before "
+                   "the crop (e.g. 84x84)")
+    p.add_argument("--cameras", type=lambda s: [c for c in s.split(",") if c], default=[],
+                   help="cameras to use, comma-separated short names (default: all)")
+    p.add_argument("--resnet-width", type=int, default=64, help="channels of the ResNet-18 trunks' "
+                   "first stage (64: the paper's encoder)")
+    p.add_argument("--noise-samples", type=int, default=1, help="(timestep, noise) draws per "
+                   "encoded observation")
+    p.add_argument("--attention", default="non-causal", help="non-causal (ScaleDP) or causal "
+                   "(the DP-T-style ablation)")
+    p.add_argument("--mask-padding", action="store_true", help="leave action steps past an "
+                   "episode's end out of the loss")
+    p.add_argument("--state-norm", default="min-max", help="min-max or mean-std")
+    p.add_argument("--weight-decay", type=float, default=1e-3, help="weight decay of the "
+                   "denoiser's Linear weights")
+    p.add_argument("--encoder-weight-decay", type=float, default=1e-6, help="weight decay of "
+                   "every encoder parameter")
+    p.add_argument("--dry-run", action="store_true", help="print the parameter counts and stop")
+    # Beyond `scaledp train`'s flags: what the Rust TrainOptions offer its tests, and a record
+    # of the samples each rank trained on.
+    p.add_argument("--denoiser", type=_triple, metavar="DEPTH,WIDTH,HEADS",
+                   help="a denoiser of this shape instead of --model's preset (tests, ablations)")
+    p.add_argument("--log-samples", action="store_true", help="write samples-rank<R>.jsonl in the "
+                   "run directory: the (episode_index, frame_index) pairs each step trained on")
+    p.add_argument("--view", nargs="?", const="", default=None, metavar="URL",
+                   help="plot the loss, lr and validation errors in a rerun viewer (needs "
+                   "rerun-sdk): a new one, or the one at URL")
+
+
+def _attention(s: str) -> str:
+    v = s.lower().replace("-", "_")
+    if v in ("non_causal", "noncausal", "full"):
+        return "non_causal"
+    if v == "causal":
+        return "causal"
+    raise ValueError(f"attention {s!r}: non-causal or causal")
+
+
+def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
+    """The options of a new run from the command line (``options()`` of train.rs)."""
+    if a.model.lower() not in MODEL_SIZES:
+        raise ValueError(f"model size {a.model!r}: one of ti, s, b, l, h")
+    state_norm = {"min-max": "min_max", "min_max": "min_max", "mean-std": "mean_std",
+                  "mean_std": "mean_std"}.get(a.state_norm)
+    if state_norm is None:
+        raise ValueError(f"--state-norm {a.state_norm}: min-max or mean-std")
+    o = default_options()
+    o.update({
+        "size": a.model.lower(), "batch_size": a.batch_size, "lr": a.lr,
+        "warmup_steps": a.warmup_steps, "seed": a.seed, "checkpoint_every": a.checkpoint_every,
+        "val_every": a.val_every, "val_ratio": a.val_ratio, "crop": a.crop,
+        "obs_horizon": a.obs_horizon, "action_chunk": a.action_chunk,
+        "resnet_width": a.resnet_width, "attention": _attention(a.attention),
+        "state_norm": state_norm,
+    })
+    o["loss"] = {"noise_samples": max(1, a.noise_samples), "mask_padding": bool(a.mask_padding)}
+    o["adamw"] = dict(o["adamw"], weight_decay=a.weight_decay,
+                      encoder_weight_decay=a.encoder_weight_decay)
+    if a.steps is not None:
+        o["steps"] = a.steps
+    if a.micro_batch is not None:
+        o["micro_batch"] = a.micro_batch
+    if a.grad_clip is not None:
+        o["grad_clip"] = a.grad_clip
+    if a.image_size is not None:
+        o["image_size"] = list(a.image_size)
+    if a.cameras:
+        o["cameras"] = list(a.cameras)
+    if getattr(a, "denoiser", None):
+        o["denoiser"] = list(a.denoiser)
+    if o["steps"] < 1 or o["batch_size"] < 1:
+        raise ValueError("steps and batch size must be at least 1")
+    return o
+
+
+def encoder_decay(o: Dict[str, Any]) -> Optional[float]:
+    """The encoders' weight decay, or None for runs saved before the encoders had their own
+    group (they decayed Linear/Conv weights at ``weight_decay``)."""
+    v = o["adamw"].get("encoder_weight_decay")
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
+
+
+def cosine_lr(base: float, step: int, warmup: int, total: int) -> float:
+    """diffusers' ``get_cosine_schedule_with_warmup``: the learning rate of the update made after
+    ``step`` earlier updates."""
+    if step < warmup:
+        return base * step / max(warmup, 1)
+    progress = (step - warmup) / max(total - warmup, 1)
+    return base * max(0.0, 0.5 * (1.0 + math.cos(math.pi * progress)))
+
+
+def ema_decay(ema: Dict[str, Any], step: int) -> float:
+    """diffusion_policy's ``EMAModel`` decay of the update made after ``step`` earlier updates
+    (0 for the first two: they copy the weights)."""
+    k = max(0, step - (ema["update_after_step"] + 1))
+    if k == 0:
+        return 0.0
+    value = 1.0 - (1.0 + k / ema["inv_gamma"]) ** (-ema["power"])
+    return max(min(value, ema["max_value"]), ema["min_value"])
