@@ -34,9 +34,40 @@ impl Conv {
         Ok(if x.device().is_cpu() {
             conv2d_nhwc(x, &self.weight, self.stride, self.padding)?
         } else {
-            x.conv2d(&self.weight, self.padding, self.stride, 1, 1)?
+            conv2d_any_shape(x, &self.weight, self.padding, self.stride)?
         })
     }
+}
+
+/// candle's `conv2d` (NCHW, any device) whose backward also holds for non-square inputs.
+///
+/// candle 0.11 computes a strided convolution's input gradient with a transposed convolution
+/// whose `output_padding` it derives from the height alone, so when `(H + 2p − k) mod s` and
+/// `(W + 2p − k) mod s` differ the gradient comes out one column short or long and the backward
+/// pass fails (on CUDA: the default 320×240 → 288×216 crop meets it in `layer3`, 27×36). Zero
+/// rows or columns appended below or right make both remainders 0; they lie where the
+/// convolution's own zero padding already is for every output kept, so the kept outputs are
+/// unchanged, and the extra output row or column is cut off again.
+pub(crate) fn conv2d_any_shape(
+    x: &Tensor,
+    w: &Tensor,
+    padding: usize,
+    stride: usize,
+) -> Result<Tensor> {
+    let (_, _, h, wd) = x.dims4()?;
+    let (_, _, kh, kw) = w.dims4()?;
+    let rem = |n: usize, k: usize| (n + 2 * padding).saturating_sub(k) % stride.max(1);
+    let (rh, rw) = (rem(h, kh), rem(wd, kw));
+    if rh == rw {
+        return Ok(x.conv2d(w, padding, stride, 1, 1)?);
+    }
+    let extra = |r: usize| (stride - r) % stride;
+    let y = x
+        .pad_with_zeros(2, 0, extra(rh))?
+        .pad_with_zeros(3, 0, extra(rw))?
+        .conv2d(w, padding, stride, 1, 1)?;
+    let out = |n: usize, k: usize| (n + 2 * padding - k) / stride + 1;
+    Ok(y.narrow(2, 0, out(h, kh))?.narrow(3, 0, out(wd, kw))?)
 }
 
 /// diffusion_policy's GroupNorm for a BatchNorm of `c` channels: `c / 16` groups (at least one).
@@ -182,4 +213,66 @@ pub(crate) fn max_pool_3x3_s2(x: &Tensor) -> Result<Tensor> {
         }
     }
     Ok(out.unwrap_or(x.clone()))
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{Device, Tensor, Var};
+
+    use super::conv2d_any_shape;
+    use crate::model::conv::conv2d_nhwc;
+
+    /// The candle path (what CUDA runs) against the fused CPU convolution and its own backward,
+    /// on the shapes where height and width leave different remainders: the input gradient,
+    /// the kernel gradient and the output agree.
+    #[test]
+    fn non_square_strided_convolutions_have_the_right_gradients() -> candle_core::Result<()> {
+        let dev = Device::Cpu;
+        // (h, w, k, stride, padding): layer3 and its downsample at the 288×216 crop, the same
+        // transposed, the stem at 72×41 (the tests' crop), a stride-1 case.
+        for (h, w, k, s, p) in [
+            (27, 36, 3, 2, 1),
+            (27, 36, 1, 2, 0),
+            (36, 27, 3, 2, 1),
+            (41, 72, 7, 2, 3),
+            (9, 12, 3, 1, 1),
+        ] {
+            let x = Var::from_tensor(&Tensor::randn(0f32, 1., (2, 4, h, w), &dev)?)?;
+            let wt = Var::from_tensor(&Tensor::randn(0f32, 1., (5, 4, k, k), &dev)?)?;
+            let ours = conv2d_any_shape(x.as_tensor(), wt.as_tensor(), p, s)?;
+            let fused = conv2d_nhwc(&x.as_tensor().permute((0, 2, 3, 1))?, wt.as_tensor(), s, p)?
+                .permute((0, 3, 1, 2))?;
+            assert_eq!(ours.dims(), fused.dims(), "{h}×{w} k{k} s{s}");
+            let d = (&ours - &fused)?.abs()?.max_all()?.to_scalar::<f32>()?;
+            assert!(d < 1e-4, "{h}×{w} k{k} s{s}: forward differs by {d}");
+            let m = Tensor::randn(0f32, 1., ours.dims(), &dev)?;
+            let g1 = (ours * &m)?.sum_all()?.backward()?;
+            let g2 = (fused * &m)?.sum_all()?.backward()?;
+            for v in [&x, &wt] {
+                let (Some(a), Some(b)) = (g1.get(v.as_tensor()), g2.get(v.as_tensor())) else {
+                    panic!("no gradient")
+                };
+                assert_eq!(a.dims(), v.dims());
+                let d = (a - b)?.abs()?.max_all()?.to_scalar::<f32>()?;
+                let scale = b.abs()?.max_all()?.to_scalar::<f32>()?;
+                assert!(
+                    d <= 1e-4 * scale.max(1.0),
+                    "{h}×{w} k{k} s{s}: {d} of {scale}"
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// What the workaround is for: candle's own backward of such a convolution fails. When a
+    /// candle release fixes it, this test says so and the workaround can go.
+    #[test]
+    fn candles_own_backward_still_fails_on_them() -> candle_core::Result<()> {
+        let dev = Device::Cpu;
+        let x = Var::from_tensor(&Tensor::randn(0f32, 1., (1, 2, 27, 36), &dev)?)?;
+        let wt = Var::from_tensor(&Tensor::randn(0f32, 1., (3, 2, 3, 3), &dev)?)?;
+        let y = x.as_tensor().conv2d(wt.as_tensor(), 1, 2, 1, 1)?;
+        assert!(y.sum_all()?.backward().is_err());
+        Ok(())
+    }
 }
