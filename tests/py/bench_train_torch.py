@@ -4,7 +4,8 @@ from the same initial weights, timed on the same number of threads.
     python bench_train_torch.py CONFIG.json WEIGHTS.safetensors --batch 64 --steps 5 --threads 2
 
 CONFIG.json is a checkpoint-style config (`{"model": {...}}`). Each step: random crop of
-uint8 images, masked ε-MSE at random timesteps of the cosine schedule, backward, AdamW
+uint8 images, the encoders once, ε-MSE at `--noise-samples` random timesteps per observation
+of the cosine schedule, backward, AdamW
 (lr 1e-4, betas 0.9/0.95, weight decay 1e-3 on weight matrices). The batch is synthetic (data
 loading is measured on the Rust side). Prints one JSON line: per-step seconds (the first step,
 which allocates, is reported apart) and samples/s. Without torch it prints
@@ -41,6 +42,7 @@ def main():
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--noise-samples", type=int, default=1, help="(timestep, noise) draws per encoded observation")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
@@ -65,11 +67,13 @@ def main():
     times = []
     for _ in range(args.steps + 1):
         t0 = time.perf_counter()
-        cond = policy.encode(images, state, train=True)
-        t = torch.randint(0, 100, (b,))
-        noise = torch.randn_like(action)
+        k = args.noise_samples
+        cond = policy.encode(images, state, train=True).repeat_interleave(k, dim=0)
+        x0 = action.repeat_interleave(k, dim=0)
+        t = torch.randint(0, 100, (b * k,))
+        noise = torch.randn_like(x0)
         s = ab[t][:, None, None]
-        noisy = s.sqrt() * action + (1 - s).sqrt() * noise
+        noisy = s.sqrt() * x0 + (1 - s).sqrt() * noise
         loss = F_mse(policy(noisy, t, cond), noise)
         opt.zero_grad(set_to_none=True)
         loss.backward()
