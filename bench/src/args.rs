@@ -187,9 +187,14 @@ pub struct BenchTrainArgs {
     /// Resize images to WxH before the crop (default: as the converter wrote them).
     #[arg(long, value_name = "WxH")]
     pub image_size: Option<String>,
-    /// Samples per step.
-    #[arg(long, default_value_t = 64)]
-    pub batch_size: usize,
+    /// Train with a named recipe's settings (cpu-sim: ResNet width 32, two noise draws per
+    /// observation, batch 64; pair it with `--image-size 64x64`, the recipe's images), the
+    /// PyTorch route doing the same.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Samples per step (default 64, or the preset's).
+    #[arg(long)]
+    pub batch_size: Option<usize>,
     /// Forward/backward at most this many samples at a time.
     #[arg(long)]
     pub micro_batch: Option<usize>,

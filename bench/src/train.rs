@@ -38,11 +38,23 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     let ds = dataset.to_string_lossy().to_string();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
 
-    let mut opts = TrainOptions::default()
+    let base = match &args.preset {
+        Some(p) => TrainOptions::preset(p).with_context(|| {
+            format!(
+                "--preset {p}: one of {}",
+                scaledp_policy::PRESETS.join(", ")
+            )
+        })?,
+        None => TrainOptions::default(),
+    };
+    let batch = args.batch_size.unwrap_or(base.get_batch_size());
+    let mut opts = base
         .model(ModelSize::Ti)
-        .batch_size(args.batch_size)
+        .batch_size(batch)
         .val_ratio(0.0)
+        .val_every(0)
         .seed(0);
+    let k = opts.get_loss().noise_samples;
     if let Some(s) = &args.image_size {
         let (w, h) = parse_size(s)?;
         opts = opts.image_size(w, h);
@@ -53,9 +65,9 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     let cfg = Trainer::plan(&ds, &opts)?.model;
     let (cw, ch) = cfg.crop_size();
     println!(
-        "ScaleDP-Ti, {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}, batch {}, {threads} threads",
-        cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.state_dim, cfg.action_dim,
-        cfg.obs_horizon, cfg.action_chunk, args.batch_size
+        "ScaleDP-Ti, {} cameras {}x{} cropped to {cw}x{ch}, ResNet width {}, state {}, action {}, To {}, C {}, batch {batch}, {k} noise draw(s) per observation, {threads} threads",
+        cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.resnet_width, cfg.state_dim, cfg.action_dim,
+        cfg.obs_horizon, cfg.action_chunk
     );
 
     eprintln!(
@@ -64,18 +76,34 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     );
     let t = train_throughput(&ds, opts, 1, args.steps, &Device::Cpu)?;
     println!(
-        "rust (candle)   {:>7.2} s/step  {:>7.2} samples/s  data wait {:.1} % of step time (goal < 5 %)",
+        "rust (CPU engine) {:>7.2} s/step  {:>7.2} samples/s  data wait {:.1} % of step time (goal < 5 %)",
         t.step_s,
         t.samples_per_s,
         100.0 * t.data_wait_share
     );
-    match torch_route(&args, &cfg, &work, threads) {
-        Ok(v) => println!(
-            "pytorch {}  {:>7.2} s/step  {:>7.2} samples/s  (same weights, synthetic batch, {threads} threads)",
-            v["torch"].as_str().unwrap_or("?"),
-            v["mean_step_s"].as_f64().unwrap_or(f64::NAN),
-            v["samples_per_s"].as_f64().unwrap_or(f64::NAN),
-        ),
+    let p = &t.phases;
+    let other = (t.step_s - p.encode_s - p.denoise_s - p.backward_s - t.optimizer_s).max(0.0);
+    println!(
+        "  where a step goes: encoders {:.3} s, denoiser + loss {:.3} s, backward {:.3} s, AdamW + EMA {:.3} s, data and the rest {other:.3} s; {} cores busy",
+        p.encode_s,
+        p.denoise_s,
+        p.backward_s,
+        t.optimizer_s,
+        t.cpu_s.map_or("?".into(), |c| format!("{:.2}", c / t.step_s.max(1e-9)))
+    );
+    match torch_route(&args, &cfg, &work, threads, batch, k) {
+        Ok(v) => {
+            let torch_s = v["mean_step_s"].as_f64().unwrap_or(f64::NAN);
+            println!(
+                "pytorch {}    {torch_s:>7.2} s/step  {:>7.2} samples/s  (same weights, synthetic batch, {threads} threads)",
+                v["torch"].as_str().unwrap_or("?"),
+                v["samples_per_s"].as_f64().unwrap_or(f64::NAN),
+            );
+            println!(
+                "rust ÷ pytorch speed: {:.2}× (PyTorch's s/step over ours; goal ≥ 1.0)",
+                torch_s / t.step_s
+            );
+        }
         Err(why) => println!("pytorch         not measured: {why}"),
     }
 
@@ -141,6 +169,8 @@ fn torch_route(
     cfg: &ModelConfig,
     work: &Path,
     threads: usize,
+    batch: usize,
+    noise_samples: usize,
 ) -> Result<serde_json::Value, NotRun> {
     if args.no_python {
         return Err(NotRun::Skipped);
@@ -155,7 +185,8 @@ fn torch_route(
     cmd.env("PYTHONPATH", &site)
         .arg(config)
         .arg(weights)
-        .args(["--batch", &args.batch_size.to_string()])
+        .args(["--batch", &batch.to_string()])
+        .args(["--noise-samples", &noise_samples.to_string()])
         .args(["--steps", &(args.steps + 1).to_string()])
         .args(["--threads", &threads.to_string()]);
     eprintln!("training the same model in PyTorch…");

@@ -55,6 +55,8 @@ pub struct Controller {
     origin_ns: Option<u64>,
     index: u64,
     history: VecDeque<(Vec<u8>, Vec<f32>)>,
+    /// The first tick's images, with [`ControlOptions::freeze_cameras`].
+    frozen: Option<Vec<u8>>,
     prev_pose: Vec<Option<[f64; 6]>>,
     plan: BTreeMap<u64, Vec<f32>>,
     pending: Option<u64>,
@@ -176,6 +178,7 @@ impl Controller {
             origin_ns: None,
             index: 0,
             history: VecDeque::new(),
+            frozen: None,
             prev_pose: vec![None; n],
             plan: BTreeMap::new(),
             pending: None,
@@ -244,6 +247,7 @@ impl Controller {
         self.prev_pose.iter_mut().for_each(|p| *p = None);
         self.last_command.iter_mut().for_each(|p| *p = None);
         self.stop("reset");
+        self.frozen = None;
         self.halted = None;
     }
 
@@ -435,6 +439,12 @@ impl Controller {
             state.extend(pose.iter().map(|&v| v as f32));
             state.push(width as f32);
         }
+        // The frozen-cameras control: every window shows the episode's first frames.
+        let images = if self.opts.freeze_cameras {
+            self.frozen.get_or_insert(images).clone()
+        } else {
+            images
+        };
         self.history.push_back((images, state));
         while self.history.len() > self.cfg.model.obs_horizon {
             self.history.pop_front();

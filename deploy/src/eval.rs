@@ -25,8 +25,44 @@ use crate::error::{Error, Result};
 use crate::recording::Rollout;
 use crate::stats::{percentile, wilson_interval};
 
-/// Eval's default first seed: collect's seeds start at 0.
-pub const HELD_OUT_SEED: u64 = 1_000_000;
+/// The first validation seed: checkpoints are chosen and recipes tuned on seeds from here.
+pub const VALIDATION_SEED: u64 = 1_000_000;
+/// The first test seed: success rates are reported on seeds from here, never used to choose.
+pub const TEST_SEED: u64 = 2_000_000;
+/// The old name of [`VALIDATION_SEED`] (eval's default first seed before the split existed).
+pub const HELD_OUT_SEED: u64 = VALIDATION_SEED;
+
+/// Which fixed seed range an evaluation draws from. `scaledp collect` starts at 0 (a
+/// collection of up to a million episodes stays below both).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Split {
+    /// Seeds 1 000 000 …: choosing checkpoints, tuning recipes.
+    Val,
+    /// Seeds 2 000 000 …: the reported figures.
+    Test,
+}
+
+impl Split {
+    /// The range's first seed.
+    pub fn first_seed(self) -> u64 {
+        match self {
+            Split::Val => VALIDATION_SEED,
+            Split::Test => TEST_SEED,
+        }
+    }
+    /// The split a seed range starting at `seed` with `n` episodes lies in, if one.
+    pub fn of(seed: u64, n: u64) -> Option<Split> {
+        let end = seed.saturating_add(n);
+        if seed >= TEST_SEED {
+            Some(Split::Test)
+        } else if seed >= VALIDATION_SEED && end <= TEST_SEED {
+            Some(Split::Val)
+        } else {
+            None
+        }
+    }
+}
 
 /// Simulated time t is stamped `ORIGIN_NS + t` (an epoch time, as a rig's clock would give).
 pub const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
@@ -62,7 +98,7 @@ impl Default for EvalOptions {
 }
 
 /// One episode's outcome.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct EpisodeReport {
     /// The episode's seed.
     pub seed: u64,
@@ -89,7 +125,7 @@ pub struct EpisodeReport {
 }
 
 /// The run's report (`--report` JSON).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct EvalReport {
     /// The checkpoint directory.
     pub checkpoint: String,

@@ -10,7 +10,10 @@
 //! - [`eval`] runs seeded episodes of the simulated task in simulated time — the world stepped,
 //!   the cameras rendered and the same core called synchronously — and reports the success
 //!   rate with its 95 % Wilson interval ([`stats`]); [`live`] runs the simulator and [`serve`]
-//!   over loopback Zenoh in real time instead.
+//!   over loopback Zenoh in real time instead. Seeds come in fixed ranges ([`Split`]): the
+//!   demonstrations' (0 …), validation (1 000 000 …, to choose checkpoints and tune) and test
+//!   (2 000 000 …, what is reported). [`run_expert`] scores the scripted teleoperator on the
+//!   same seeds (the ceiling control); [`ControlOptions::freeze_cameras`] the vision control.
 //! - [`check`] refuses, in one line and before anything moves, a checkpoint for another rig or
 //!   a rig lacking the checkpoint's cameras or dimensions.
 
@@ -18,6 +21,7 @@ pub mod check;
 pub mod controller;
 mod error;
 pub mod eval;
+mod expert;
 pub mod live;
 mod options;
 mod recording;
@@ -29,7 +33,8 @@ mod tick;
 
 pub use controller::{Command, ControlOptions, Controller, Request, Tick};
 pub use error::{Error, Result};
-pub use eval::{run_eval, EpisodeReport, EvalOptions, EvalReport};
+pub use eval::{run_eval, EpisodeReport, EvalOptions, EvalReport, Split};
+pub use expert::run_expert;
 pub use live::run_live;
 pub use safety::{Limits, Workspace};
 pub use serve::{ServeOptions, Server, Status};

@@ -24,6 +24,9 @@ pub struct ControlOptions {
     /// sample after it and the tick's camera frames (tens of ms in flight) have arrived; never
     /// less than 1.5 periods of the slowest joint or gripper stream.
     pub obs_lag_s: f64,
+    /// A control for evaluations: every observation shows the cameras' first frames of the
+    /// episode (the state stays live), so a policy that succeeds anyway is not using vision.
+    pub freeze_cameras: bool,
 }
 
 impl Default for ControlOptions {
@@ -37,6 +40,7 @@ impl Default for ControlOptions {
             min_silence_s: 0.05,
             frame_stale_periods: 1.5,
             obs_lag_s: 0.05,
+            freeze_cameras: false,
         }
     }
 }

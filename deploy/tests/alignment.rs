@@ -68,3 +68,61 @@ fn a_replayed_rollout_gives_the_observations_the_converter_stored() {
     }
     assert!(compared >= 14, "{compared} ticks compared");
 }
+
+/// The frozen-cameras control: over a demonstration whose arm moves, every window shows the
+/// episode's first frames while the state follows the arm; without it the images change.
+#[test]
+fn frozen_cameras_show_the_first_frames_while_the_state_moves() {
+    let rig = common::light_rig();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("demo.mcap");
+    scaledp_sim::write_episode(
+        &path,
+        &rig,
+        3,
+        4.0,
+        1_700_000_000_000_000_000,
+        "cube",
+        &mut |_, _, _, _| {},
+    )
+    .unwrap();
+    let rec = read_mcap(&path, &|_| true).unwrap();
+    let ckpt = common::write(dir.path(), &common::Spec::at_home(&rig));
+    let policy = Policy::load(&ckpt, &Device::Cpu).unwrap();
+    for freeze in [false, true] {
+        let opts = ControlOptions {
+            action_steps: 1,
+            obs_lag_s: 0.0,
+            freeze_cameras: freeze,
+            ..ControlOptions::default()
+        };
+        let mut ctl = Controller::new(policy.config(), "tiny", &rig, opts).unwrap();
+        let windows = common::replay(&mut ctl, &rig, &rec, 35);
+        assert!(windows.len() >= 30, "{} windows", windows.len());
+        let first = &windows[0].1;
+        let same_images = windows
+            .iter()
+            .filter(|(_, w)| w.images == first.images)
+            .count();
+        let moved = windows.iter().any(|(_, w)| {
+            w.state
+                .iter()
+                .zip(&first.state)
+                .any(|(a, b)| (a - b).abs() > 1e-3)
+        });
+        assert!(moved, "the arm moves in the demonstration");
+        if freeze {
+            assert_eq!(
+                same_images,
+                windows.len(),
+                "frozen: every window shows the first frames"
+            );
+        } else {
+            assert!(
+                same_images < windows.len() / 2,
+                "live cameras: {same_images} of {} windows unchanged",
+                windows.len()
+            );
+        }
+    }
+}

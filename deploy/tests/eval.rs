@@ -175,3 +175,41 @@ fn a_live_episode_runs_the_sim_and_serve_over_loopback() {
     assert!(e.chunks >= 3 && e.halted_ticks <= 2, "{e:?}");
     assert!(report.e2e_ms_p50.unwrap() >= report.inference_ms_p50.unwrap());
 }
+
+/// The ceiling control: the scripted teleoperator on the evaluation's seeds, scored by the same
+/// scorer, succeeds and reports the same way twice.
+#[test]
+fn the_scripted_expert_scores_on_the_same_seeds() {
+    let rig = common::light_rig();
+    let opts = EvalOptions {
+        episodes: 3,
+        seed: scaledp_deploy::Split::Test.first_seed(),
+        ..EvalOptions::default()
+    };
+    let a = scaledp_deploy::run_expert(&rig, &opts, &mut |_| {}).unwrap();
+    let b = scaledp_deploy::run_expert(&rig, &opts, &mut |_| {}).unwrap();
+    assert_eq!(a.mode, "scripted-expert");
+    assert_eq!(
+        a.episodes.iter().map(|e| e.seed).collect::<Vec<_>>(),
+        [2_000_000, 2_000_001, 2_000_002]
+    );
+    assert_eq!(a.successes, 3, "{:?}", a.episodes);
+    for (x, y) in a.episodes.iter().zip(&b.episodes) {
+        assert_eq!(
+            (x.success, x.time_to_success_s, x.duration_s),
+            (y.success, y.time_to_success_s, y.duration_s)
+        );
+        // The episode ends once the task has been a success for settle_s.
+        let t = x.time_to_success_s.unwrap();
+        assert!((x.duration_s - t - opts.settle_s).abs() < 0.02, "{x:?}");
+    }
+    assert_eq!(
+        scaledp_deploy::Split::of(2_000_000, 50),
+        Some(scaledp_deploy::Split::Test)
+    );
+    assert_eq!(
+        scaledp_deploy::Split::of(1_000_000, 50),
+        Some(scaledp_deploy::Split::Val)
+    );
+    assert_eq!(scaledp_deploy::Split::of(999_990, 50), None);
+}

@@ -34,6 +34,12 @@ pub struct TrainThroughput {
     pub data_wait_share: f64,
     /// Parameters: encoders, denoiser.
     pub params: (usize, usize),
+    /// Mean time per step of the encoders, the denoiser and loss, the backward pass (s).
+    pub phases: Phases,
+    /// Mean time per step of AdamW and the EMA (s).
+    pub optimizer_s: f64,
+    /// CPU time of the process per step (s; all threads), where readable.
+    pub cpu_s: Option<f64>,
 }
 
 /// Trains `steps` steps (after `warmup` untimed ones) on `dataset` with `opts` into a scratch
@@ -57,12 +63,21 @@ pub fn train_throughput(
         t.step()?;
     }
     let (mut busy, mut wait, mut samples) = (0f64, 0f64, 0usize);
+    let (mut phases, mut optimizer_s) = (Phases::default(), 0f64);
+    let cpu0 = process_cpu_s();
     for _ in 0..steps {
         let r = t.step()?;
         busy += r.step_s;
         wait += r.data_wait_s;
         samples += r.samples;
+        phases.encode_s += r.phases.encode_s;
+        phases.denoise_s += r.phases.denoise_s;
+        phases.backward_s += r.phases.backward_s;
+        optimizer_s += r.optimizer_s;
     }
+    let cpu = cpu0
+        .zip(process_cpu_s())
+        .map(|(a, b)| (b - a) / steps.max(1) as f64);
     let counts = ScaleDp::count(&t.config().model)?;
     let _ = std::fs::remove_dir_all(&dir);
     let n = steps.max(1) as f64;
@@ -73,6 +88,13 @@ pub fn train_throughput(
         samples_per_s: samples as f64 / busy.max(1e-9),
         data_wait_share: wait / busy.max(1e-9),
         params: (counts.encoders, counts.denoiser),
+        phases: Phases {
+            encode_s: phases.encode_s / n,
+            denoise_s: phases.denoise_s / n,
+            backward_s: phases.backward_s / n,
+        },
+        optimizer_s: optimizer_s / n,
+        cpu_s: cpu,
     })
 }
 

@@ -90,7 +90,8 @@ mod scheduler;
 mod trainer;
 
 pub use checkpoint::{
-    resolve as resolve_checkpoint, CheckpointConfig, Normalization, NormalizerConfig,
+    list as list_checkpoints, resolve as resolve_checkpoint, CheckpointConfig, Normalization,
+    NormalizerConfig,
 };
 pub use config::{Attention, DiffusionConfig, ImageRange, ModelConfig, ModelSize};
 pub use error::{Error, Mismatch, Result};
@@ -101,5 +102,5 @@ pub use predict::{predict_episode, EpisodePrediction};
 pub use scheduler::NoiseScheduler;
 pub use trainer::{
     cosine_lr, AdamWConfig, EmaConfig, Event, LossSpec, Phases, StateNorm, StepRecord, Summary,
-    TrainOptions, Trainer, ValRecord,
+    TrainOptions, Trainer, ValRecord, PRESETS,
 };

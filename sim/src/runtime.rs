@@ -79,7 +79,10 @@ impl SimOptions {
         self.seed = seed;
         self
     }
-    /// Wall-clock origin of the streams' capture grid (ns since the epoch).
+    /// Wall-clock origin of the streams' capture grid (ns since the epoch). With it every
+    /// slot of the grid is published, a backlog included (replays, deterministic tests);
+    /// without it the streams start now and run in real time, skipping the frames a busy
+    /// machine cannot make (with a warning) so that stamps never drift behind real time.
     pub fn start_time_ns(mut self, ns: u64) -> Self {
         self.start_time_ns = Some(ns);
         self
@@ -232,6 +235,7 @@ impl SimOptions {
                 ),
                 t0,
                 rmw: (self.keys == KeyStyle::Rmw).then(|| vec![n as u8; 16]),
+                realtime: self.start_time_ns.is_none(),
             };
             let topic = stream.topic.clone();
             let handle = std::thread::Builder::new()

@@ -61,6 +61,9 @@ pub(crate) struct StreamCtx {
     pub rng: ChaCha8Rng,
     pub t0: u64,
     pub rmw: Option<Vec<u8>>,
+    /// Real time: a stream behind by more than a period skips to the current slot (a busy
+    /// machine's camera drops frames). Off for an explicit origin: every slot is published.
+    pub realtime: bool,
 }
 
 /// The rig's streams, cameras first, in `Rig::topics` order (command topics excluded).
@@ -142,6 +145,33 @@ pub(crate) fn streams(
     Ok(out)
 }
 
+/// Frames a stream skipped because it fell behind real time, and the warning about it (at most
+/// one every five seconds).
+#[derive(Default)]
+struct Lag {
+    skipped: u64,
+    warned_ns: Option<u64>,
+}
+
+impl Lag {
+    fn skipped(&mut self, topic: &str, n: u64, published: u64, rate_hz: f64) {
+        self.skipped += n;
+        let now = now_ns();
+        if self
+            .warned_ns
+            .is_none_or(|t| now.saturating_sub(t) >= 5_000_000_000)
+        {
+            self.warned_ns = Some(now);
+            let share = published as f64 / (published + self.skipped).max(1) as f64;
+            tracing::warn!(
+                "{topic}: the machine cannot keep up: {} frames skipped so far, publishing at about {:.0} of {rate_hz:.0} Hz",
+                self.skipped,
+                share * rate_hz
+            );
+        }
+    }
+}
+
 fn sleep_until(ns: u64) {
     let now = now_ns();
     if ns > now {
@@ -158,8 +188,21 @@ impl Stream {
     ) -> (String, u64) {
         let period_ns = 1e9 / self.rate_hz;
         let mut image_buf = Vec::new();
-        let mut k: u64 = 0;
+        // k: the capture slot on the stream's grid; seq: messages published.
+        let (mut k, mut seq): (u64, u64) = (0, 0);
+        let mut lag = Lag::default();
         while !ctx.shared.stop.load(Ordering::Relaxed) {
+            // A sensor that cannot keep up drops frames, as a real camera on a busy machine
+            // does: when a slot's instant has passed by more than a period, the next capture
+            // is the slot of now, so stamps stay on real time at a lower rate (instead of a
+            // backlog whose stamps drift behind every other stream's).
+            let now = now_ns();
+            let slot_ns = ctx.t0 + (k as f64 * period_ns) as u64;
+            if ctx.realtime && now > slot_ns + period_ns as u64 {
+                let caught_up = ((now - ctx.t0) as f64 / period_ns).floor() as u64;
+                lag.skipped(&self.topic, caught_up - k, seq, self.rate_hz);
+                k = caught_up;
+            }
             let jitter = ctx.rng.random_range(-1.0..=1.0) * self.stamp_jitter_ms * 1e6;
             let latency =
                 (self.latency_ms.0 + ctx.rng.random_range(0.0..=1.0) * self.latency_ms.1) * 1e6;
@@ -181,7 +224,7 @@ impl Stream {
             let put = match &ctx.rmw {
                 Some(gid) => put.attachment(
                     RmwAttachment {
-                        sequence_number: k as i64 + 1,
+                        sequence_number: seq as i64 + 1,
                         source_timestamp_ns: now_ns() as i64,
                         source_gid: gid.clone(),
                     }
@@ -193,8 +236,9 @@ impl Stream {
                 tracing::warn!("{}: {e}", self.topic);
             }
             k += 1;
+            seq += 1;
         }
-        (self.topic, k)
+        (self.topic, seq)
     }
 
     fn message(

@@ -297,3 +297,52 @@ fn a_reset_over_zenoh_redraws_the_task_and_the_status_key_reports_it() {
     let _ = harness.close().wait();
     let _ = sim_session.close().wait();
 }
+
+/// A camera asked for more frames than the machine renders drops frames instead of falling
+/// behind: its stamps stay on real time (a backlog would stamp frames further and further in
+/// the past, until an episode's images no longer overlap its joints), at a lower rate.
+#[test]
+fn a_camera_that_cannot_keep_up_skips_frames_and_stays_on_real_time() {
+    let mut rig = Rig::builtin("franka_sim").unwrap();
+    rig.cameras.truncate(1);
+    rig.cameras[0].width = 320;
+    rig.cameras[0].height = 240;
+    rig.cameras[0].fps = 5000.0;
+    let topic = rig.cameras[0].topic.clone();
+    let session = net::open(net::zenoh_config(None, &[], &[endpoint()]).unwrap()).unwrap();
+    // (capture stamp, time seen) of every frame.
+    let got: Arc<Mutex<Vec<(u64, u64)>>> = Arc::default();
+    let sink = got.clone();
+    let cam = topic.clone();
+    let sim = SimOptions::new(rig)
+        .on_publish(Arc::new(move |t, payload| {
+            if t == cam {
+                let stamp = header_stamp(payload).unwrap().as_ns();
+                sink.lock()
+                    .unwrap()
+                    .push((stamp, scaledp_recorder::now_ns()));
+            }
+        }))
+        .spawn(&session)
+        .unwrap();
+    let started = Instant::now();
+    assert!(wait_until(30.0, || started.elapsed() >= Duration::from_secs(2)));
+    sim.stop();
+    session.close().wait().unwrap();
+    let got = got.lock().unwrap();
+    let span_s = started.elapsed().as_secs_f64();
+    assert!(got.len() > 20, "{} frames in {span_s:.1} s", got.len());
+    assert!(
+        (got.len() as f64) < 0.5 * 5000.0 * span_s,
+        "{} frames in {span_s:.1} s: nothing was skipped",
+        got.len()
+    );
+    // Stamps follow the clock: the newest frames are not older than the first ones were.
+    let lag_ms = |&(stamp, seen): &(u64, u64)| seen.saturating_sub(stamp) as f64 * 1e-6;
+    let early = got[..10].iter().map(lag_ms).fold(0.0, f64::max);
+    let late = got[got.len() - 10..].iter().map(lag_ms).fold(0.0, f64::max);
+    assert!(
+        late < early + 100.0,
+        "{topic}: frames lag the clock by {late:.0} ms at the end, {early:.0} ms at the start"
+    );
+}

@@ -30,8 +30,13 @@ mod tests {
 
     #[test]
     fn a_free_port_can_be_bound() {
-        let port = free_port().expect("a free port");
-        assert!(std::net::TcpListener::bind(("127.0.0.1", port)).is_ok());
+        // Another process may take a port between the probe and the bind (CI once saw it):
+        // the contract is that a returned port is nearly always bindable, so one of a few is.
+        let bound = (0..5).any(|_| {
+            let port = free_port().expect("a free port");
+            port != 0 && std::net::TcpListener::bind(("127.0.0.1", port)).is_ok()
+        });
+        assert!(bound, "none of five probed ports could be bound again");
         assert!(free_endpoint().starts_with("tcp/127.0.0.1:"));
     }
 }

@@ -5,9 +5,9 @@ one PyTorch definition), from the same initial weights, timed on the same number
         --batch 64 --steps 5 --threads 2
 
 CONFIG.json is a checkpoint-style config (`{"model": {...}}`). Each step is the trainer's
-(scaledp_data.policy.trainer): random crops of the uint8 images, the epsilon-MSE at random
-timesteps of the cosine schedule over every action step, backward, AdamW (lr 1e-4, betas
-0.9/0.95, the Rust trainer's parameter groups: 1e-3 on the denoiser's Linear weights, 1e-6 on
+(scaledp_data.policy.trainer): random crops of the uint8 images, the encoders once, the
+epsilon-MSE at `--noise-samples` random timesteps per observation of the cosine schedule over
+every action step, backward, AdamW (lr 1e-4, betas 0.9/0.95, the Rust trainer's parameter groups: 1e-3 on the denoiser's Linear weights, 1e-6 on
 every encoder tensor). The batch is synthetic (data loading is measured on the Rust side).
 Prints one JSON line: per-step seconds (the first step, which allocates, is reported apart) and
 samples/s. Without torch, or without the module, it prints `{"error": "..."}`.
@@ -39,6 +39,7 @@ def main():
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--noise-samples", type=int, default=1, help="(timestep, noise) draws per encoded observation")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     with open(args.config) as f:
@@ -59,8 +60,9 @@ def main():
     times = []
     for _ in range(args.steps + 1):
         t0 = time.perf_counter()
-        d = Draws.random(cfg, b, 1, sched.train_steps, g)
-        loss = loss_fn(images, state, action, pad, d.crops, d.timesteps, d.noise) / (b * c * a)
+        d = Draws.random(cfg, b, args.noise_samples, sched.train_steps, g)
+        loss = loss_fn(images, state, action, pad, d.crops, d.timesteps, d.noise) / (
+            b * c * a * max(1, args.noise_samples))
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

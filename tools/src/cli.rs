@@ -71,7 +71,7 @@ pub enum Command {
     #[command(subcommand)]
     Bench(scaledp_bench::BenchCommand),
     /// Train a ScaleDP policy on a LeRobot dataset (checkpoints, metrics.jsonl, --resume).
-    Train(crate::commands::train::TrainArgs),
+    Train(Box<crate::commands::train::TrainArgs>),
     /// Run a checkpoint over a recorded episode: predicted vs recorded actions and their error.
     Predict(crate::commands::predict::PredictArgs),
     /// Drive a rig with a checkpoint over Zenoh: observations built as the converter built the
@@ -80,6 +80,10 @@ pub enum Command {
     /// A checkpoint's success rate on seeded, held-out episodes of the simulated task (95 %
     /// Wilson interval, per-episode outcomes, a JSON report).
     Eval(crate::commands::eval::EvalArgs),
+    /// The paper's comparisons at this machine's scale (non-causal vs causal attention, Ti vs S)
+    /// with one recipe, chosen on validation seeds, reported on test seeds with controls.
+    #[command(subcommand)]
+    Experiment(scaledp_experiment::ExperimentCommand),
     /// The whole path on a simulated rig: records a few short episodes over loopback, converts
     /// them into a LeRobot dataset and runs one epoch of the training-data loader.
     Demo(DemoArgs),

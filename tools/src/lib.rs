@@ -6,6 +6,7 @@
 
 pub mod cli;
 mod commands;
+mod shared;
 mod ui;
 
 use clap::Parser;

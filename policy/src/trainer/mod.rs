@@ -9,6 +9,7 @@ pub(crate) mod checkpointing;
 mod loss;
 pub(crate) mod optim;
 mod options;
+mod presets;
 mod validate;
 
 use std::io::Write;
@@ -33,6 +34,7 @@ pub use loss::{LossSpec, Phases};
 use optim::AdamW;
 pub use optim::{AdamWConfig, EmaConfig};
 pub use options::{cosine_lr, StateNorm, TrainOptions};
+pub use presets::PRESETS;
 pub use validate::ValRecord;
 
 /// What one optimizer step did (one line of `metrics.jsonl`).
@@ -52,6 +54,10 @@ pub struct StepRecord {
     pub step_s: f64,
     /// Part of it spent waiting for the loader (s).
     pub data_wait_s: f64,
+    /// Where the rest went: encoders, denoiser and loss, backward pass (s).
+    pub phases: Phases,
+    /// AdamW and the EMA (s).
+    pub optimizer_s: f64,
     /// The loader's epoch.
     pub epoch: u64,
 }
@@ -298,6 +304,7 @@ impl Trainer {
             self.opts.steps,
         );
         let micro = self.opts.micro_batch;
+        let mut phases = Phases::default();
         let (loss, grads) = loss_and_grads(
             &self.model,
             &mut self.engine,
@@ -307,8 +314,9 @@ impl Trainer {
             self.opts.loss,
             micro,
             &mut rng,
-            &mut Phases::default(),
+            &mut phases,
         )?;
+        let t_opt = Instant::now();
         if !loss.is_finite() {
             return Err(Error::Diverged {
                 step: self.step + 1,
@@ -328,6 +336,7 @@ impl Trainer {
             self.optim.params(),
             self.opts.ema.decay(self.step),
         )?;
+        let optimizer_s = t_opt.elapsed().as_secs_f64();
         self.step += 1;
         let samples = batch.len;
         self.loader.recycle(batch);
@@ -339,6 +348,8 @@ impl Trainer {
             samples,
             step_s: t0.elapsed().as_secs_f64(),
             data_wait_s: wait,
+            phases,
+            optimizer_s,
             epoch: self.loader.state().epoch,
         };
         self.log(&serde_json::json!({"kind": "train", "record": &rec}))?;
@@ -376,6 +387,11 @@ impl Trainer {
         let (mut wait, mut busy) = (0f64, 0f64);
         let mut recent = std::collections::VecDeque::new();
         let mut interrupted = false;
+        // The untrained weights as step 0: the control of a success-rate curve.
+        if self.step == 0 && self.opts.checkpoint_every > 0 && self.last_checkpoint.is_none() {
+            let dir = self.save_checkpoint()?;
+            on(&Event::Checkpoint(dir));
+        }
         while self.step < self.opts.steps {
             if self.stop.load(Ordering::Relaxed) {
                 interrupted = true;

@@ -261,6 +261,18 @@ impl TrainOptions {
         self
     }
 
+    /// The checkpoint interval.
+    pub fn get_checkpoint_every(&self) -> u64 {
+        self.checkpoint_every
+    }
+    /// The model size.
+    pub fn get_model(&self) -> ModelSize {
+        self.size
+    }
+    /// AdamW's settings.
+    pub fn get_adamw(&self) -> AdamWConfig {
+        self.adamw
+    }
     /// The loss settings.
     pub fn get_loss(&self) -> LossSpec {
         self.loss

@@ -12,48 +12,10 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use scaledp_recorder::{Command, Event, Label, RecorderOptions};
 use scaledp_schema::Rig;
-use scaledp_sim::{EpisodeLine, SimOptions, TaskState};
+use scaledp_sim::{EpisodeLine, SimOptions};
 
-use super::record::wait_for_topics;
 use crate::cli::{CollectArgs, ExitStatus};
-
-/// Successes and times over a run of episodes.
-#[derive(Debug, Default)]
-pub struct Tally {
-    /// Episodes counted.
-    pub episodes: u64,
-    /// Of which successes.
-    pub successes: u64,
-    duration_s: f64,
-    time_to_success_s: f64,
-}
-
-impl Tally {
-    /// Counts one episode that ended in `task` after `duration_s`.
-    pub fn add(&mut self, task: &TaskState, duration_s: f64) {
-        self.episodes += 1;
-        self.duration_s += duration_s;
-        if task.success {
-            self.successes += 1;
-            self.time_to_success_s += task.time_to_success_s.unwrap_or(duration_s);
-        }
-    }
-    /// Success rate (0 without episodes).
-    pub fn rate(&self) -> f64 {
-        self.successes as f64 / self.episodes.max(1) as f64
-    }
-    /// Mean episode duration (s).
-    pub fn mean_duration_s(&self) -> f64 {
-        self.duration_s / self.episodes.max(1) as f64
-    }
-    /// Mean time to success over the successes (s).
-    pub fn mean_time_to_success_s(&self) -> f64 {
-        self.time_to_success_s / self.successes.max(1) as f64
-    }
-}
-
-/// The 95 % Wilson score interval (one definition, shared with `scaledp eval`).
-pub use scaledp_deploy::wilson_interval;
+use crate::shared::{self, wait_for_topics, wilson_interval, Successes};
 
 /// The task in words, for a rig with `arms` arms.
 fn default_task(arms: usize) -> &'static str {
@@ -80,12 +42,12 @@ pub fn run(args: CollectArgs) -> Result<ExitStatus> {
         .clone()
         .unwrap_or_else(|| default_task(rig.arms.len()).to_string());
     // By default the session only listens on a free loopback port: nothing else joins it.
-    let listen = [format!("tcp/127.0.0.1:{}", super::free_port()?)];
-    let config = super::zenoh_config(&args.net, &listen)?;
+    let listen = [format!("tcp/127.0.0.1:{}", shared::free_port()?)];
+    let config = shared::zenoh_config(&args.net, &listen)?;
     let recorder = RecorderOptions::new(rig.clone(), &args.out)
         .task(&task)
         .operator("scripted-expert")
-        .compression(super::compression(args.compression))
+        .compression(shared::compression(args.compression))
         .control_prefix(format!("scaledp/collect/{}", std::process::id()))
         .start(config)?;
     // The simulator publishes on the recorder's own session: same process, no socket between.
@@ -93,7 +55,7 @@ pub fn run(args: CollectArgs) -> Result<ExitStatus> {
         .seed(args.seed)
         .scripted_operator(true)
         .spawn(recorder.session())?;
-    let stop = super::interrupt_flag();
+    let stop = shared::interrupt_flag();
     wait_for_topics(&recorder, 15.0, &stop);
     let manifest_path = args.out.join("collect.jsonl");
     let mut manifest = std::fs::OpenOptions::new()
@@ -109,7 +71,7 @@ pub fn run(args: CollectArgs) -> Result<ExitStatus> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let started = Instant::now();
-    let (mut tally, mut lost, mut failed) = (Tally::default(), 0u64, 0u64);
+    let (mut tally, mut lost, mut failed) = (Successes::default(), 0u64, 0u64);
     for i in 0..args.episodes {
         if stop.load(Ordering::Relaxed) {
             break;
@@ -195,21 +157,4 @@ pub fn run(args: CollectArgs) -> Result<ExitStatus> {
     } else {
         ExitStatus::Success
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn wilson_intervals_match_the_textbook() {
-        // 80 of 100: 71.1–86.7 %; 100 of 100: 96.3–100 %.
-        let (lo, hi) = wilson_interval(80, 100);
-        assert!(
-            (lo - 0.7112).abs() < 1e-3 && (hi - 0.8666).abs() < 1e-3,
-            "{lo} {hi}"
-        );
-        let (lo, hi) = wilson_interval(100, 100);
-        assert!((lo - 0.9630).abs() < 1e-3 && hi == 1.0, "{lo} {hi}");
-    }
 }

@@ -16,14 +16,14 @@ use scaledp_policy::{predict_episode, Event, ModelSize, Policy, TrainOptions, Tr
 use scaledp_recorder::{net, Label, RecorderOptions};
 use scaledp_schema::Rig;
 
-use super::record::{timed_episodes, wait_for_topics};
 use crate::cli::{DemoArgs, ExitStatus};
+use crate::shared::{self, timed_episodes, wait_for_topics};
 use crate::ui::topic_labels;
 use scaledp_sim::SimOptions;
 
 pub fn run(args: DemoArgs) -> Result<ExitStatus> {
     let rig = Rig::load_or_builtin(&args.rig)?;
-    let endpoint = format!("tcp/127.0.0.1:{}", super::free_port()?);
+    let endpoint = format!("tcp/127.0.0.1:{}", shared::free_port()?);
     eprintln!(
         "simulating rig '{}' on {endpoint}; recording {} episodes of {} s",
         rig.name, args.episodes, args.duration
@@ -44,7 +44,7 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
         .task("put the red cube on the green square")
         .operator("scaledp demo")
         .start(net::zenoh_config(None, &[endpoint], &[])?)?;
-    let stop = super::interrupt_flag();
+    let stop = shared::interrupt_flag();
     wait_for_topics(&recorder, 15.0, &stop);
     let tally = timed_episodes(
         &recorder,

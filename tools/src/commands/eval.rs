@@ -1,33 +1,69 @@
 //! `scaledp eval`: a checkpoint's success rate on seeded episodes of the simulated task, in
-//! simulated time (see `scaledp_deploy::eval`). Episode i uses seed `--seed + i`; the default
-//! first seed (1 000 000) is far from `scaledp collect`'s (0, 1, …), and `--collected` refuses
-//! any seed a collection manifest used.
+//! simulated time (see `scaledp_deploy::eval`). Episode i uses seed `first + i`, the first seed
+//! of the chosen split (`--split val`: 1 000 000, for choosing checkpoints and tuning; `test`:
+//! 2 000 000, for reporting) or `--seed`; both are far from `scaledp collect`'s (0, 1, …).
+//! The seeds of the demonstrations a checkpoint was trained on are refused: those listed in
+//! `--collected`, and those of the `collect.jsonl` manifests beside the recordings its dataset
+//! was converted from (found through the dataset's `meta/info.json`). The controls: `--expert`
+//! (the scripted teleoperator on the same seeds) and `--freeze-cameras` (the policy seeing only
+//! each episode's first frames).
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use scaledp_deploy::{run_eval, EvalOptions};
+use scaledp_deploy::{run_eval, run_expert, EpisodeReport, EvalOptions, EvalReport, Split};
 use scaledp_policy::Policy;
 
-use super::serve::{rig_for, ControlArgs};
+use crate::shared::{self, rig_for, ControlArgs};
+
+/// `--split`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum SplitArg {
+    /// Validation seeds (1 000 000 …).
+    Val,
+    /// Test seeds (2 000 000 …).
+    Test,
+}
+
+impl From<SplitArg> for Split {
+    fn from(s: SplitArg) -> Split {
+        match s {
+            SplitArg::Val => Split::Val,
+            SplitArg::Test => Split::Test,
+        }
+    }
+}
 use crate::cli::ExitStatus;
 
 /// `scaledp eval`.
 #[derive(Debug, Args)]
 pub struct EvalArgs {
-    /// A checkpoint directory, or a run directory (its latest checkpoint).
-    pub checkpoint: PathBuf,
+    /// A checkpoint directory, or a run directory (its latest checkpoint); not with --expert.
+    #[arg(required_unless_present = "expert")]
+    pub checkpoint: Option<PathBuf>,
     /// Rig file or shipped rig name with a simulated task (default: the checkpoint's rig).
     #[arg(long)]
     pub rig: Option<String>,
     /// Episodes.
     #[arg(long, default_value_t = 50)]
     pub episodes: u64,
-    /// First seed: episode i uses seed + i (held out: collect uses 0, 1, … by default).
-    #[arg(long, default_value_t = scaledp_deploy::eval::HELD_OUT_SEED)]
-    pub seed: u64,
+    /// The seed range: val (from 1 000 000: choose checkpoints and tune on it) or test (from
+    /// 2 000 000: report it).
+    #[arg(long, value_enum, default_value = "test")]
+    pub split: SplitArg,
+    /// First seed instead of the split's: episode i uses seed + i.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The ceiling control: score the scripted teleoperator that recorded the demonstrations on
+    /// the same seeds (needs --rig, takes no checkpoint).
+    #[arg(long, conflicts_with_all = ["live", "recordings", "view", "freeze_cameras"])]
+    pub expert: bool,
+    /// The vision control: the policy sees each episode's first camera frames throughout (the
+    /// state stays live).
+    #[arg(long)]
+    pub freeze_cameras: bool,
     /// Longest episode (simulated s).
     #[arg(long, default_value_t = 30.0)]
     pub max_seconds: f64,
@@ -59,24 +95,36 @@ pub struct EvalArgs {
 
 /// Runs `scaledp eval`.
 pub fn run(a: EvalArgs) -> Result<ExitStatus> {
-    let dev = super::train::device(&a.control.device)?;
-    let policy = Policy::load(&a.checkpoint, &dev)?;
+    let seed = a.seed.unwrap_or(Split::from(a.split).first_seed());
+    if a.expert {
+        return expert(&a, seed);
+    }
+    let Some(checkpoint) = &a.checkpoint else {
+        bail!("name a CHECKPOINT (or --expert)");
+    };
+    let dev = shared::device(&a.control.device)?;
+    let policy = Policy::load(checkpoint, &dev)?;
     let rig = rig_for(&policy, a.rig.as_deref())?;
-    if let Some(path) = &a.collected {
+    let mut manifests: Vec<PathBuf> = a.collected.iter().cloned().collect();
+    manifests.extend(shared::training_manifests(&policy.config().dataset));
+    for path in &manifests {
         let used = scaledp_deploy::eval::collected_seeds(path)?;
-        if let Some(s) = (a.seed..a.seed + a.episodes).find(|s| used.contains(s)) {
+        if let Some(s) = (seed..seed + a.episodes).find(|s| used.contains(s)) {
             bail!(
-                "seed {s} was used to collect demonstrations ({}): evaluate on held-out seeds (--seed)",
+                "seed {s} was used to collect demonstrations ({}): evaluate on held-out seeds (--split, --seed)",
                 path.display()
             );
         }
     }
     let opts = EvalOptions {
         episodes: a.episodes,
-        seed: a.seed,
+        seed,
         max_seconds: a.max_seconds,
         settle_s: a.settle_s,
-        control: a.control.options(&rig)?,
+        control: scaledp_deploy::ControlOptions {
+            freeze_cameras: a.freeze_cameras,
+            ..a.control.options(&rig)?
+        },
         recordings: a.recordings.clone(),
     };
     // With --view and no --recordings, the rollouts go to a temporary directory for the viewer.
@@ -88,17 +136,71 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
     if let Some(dir) = &scratch {
         opts.recordings = Some(dir.path().to_path_buf());
     }
-    let bar = ProgressBar::new(a.episodes).with_style(
+    if a.live && a.recordings.is_some() {
+        bail!("--recordings is not available with --live (run `scaledp record` beside it)");
+    }
+    let report = with_progress(a.episodes, |on_episode| {
+        Ok(if a.live {
+            // Only this process joins: a session listening on a free loopback port.
+            let port = shared::free_port()?;
+            let config =
+                scaledp_recorder::net::zenoh_config(None, &[], &[format!("tcp/127.0.0.1:{port}")])?;
+            let session = scaledp_recorder::net::open(config)?;
+            let dev = shared::device(&a.control.device)?;
+            scaledp_deploy::run_live(policy.dir(), &dev, &rig, &opts, &session, on_episode)?
+        } else {
+            run_eval(&policy, &rig, &opts, on_episode)?
+        })
+    })?;
+    let dir = std::path::Path::new(&report.checkpoint);
+    finish(&a, &report, &rig, seed, dir)?;
+    if let (Some(url), Some(dir)) = (&a.view, &opts.recordings) {
+        let rollouts: Vec<String> = report
+            .episodes
+            .iter()
+            .filter_map(|e| e.recording.clone())
+            .collect();
+        if rollouts.is_empty() {
+            bail!("--view: no rollout was recorded in {}", dir.display());
+        }
+        shared::viewer::show(&rollouts, url.as_deref())?;
+    }
+    Ok(ExitStatus::Success)
+}
+
+/// `--expert`: the scripted teleoperator on the same seeds.
+fn expert(a: &EvalArgs, seed: u64) -> Result<ExitStatus> {
+    let Some(name) = &a.rig else {
+        bail!("--expert needs --rig (the simulated rig whose operator to score)");
+    };
+    let rig = scaledp_schema::Rig::load_or_builtin(name)?;
+    let opts = EvalOptions {
+        episodes: a.episodes,
+        seed,
+        max_seconds: a.max_seconds,
+        settle_s: a.settle_s,
+        ..EvalOptions::default()
+    };
+    let report = with_progress(a.episodes, |on_episode| {
+        Ok(run_expert(&rig, &opts, on_episode)?)
+    })?;
+    finish(a, &report, &rig, seed, std::path::Path::new("."))?;
+    Ok(ExitStatus::Success)
+}
+
+/// Runs `f` with a progress bar and one printed line per episode.
+fn with_progress(
+    episodes: u64,
+    f: impl FnOnce(&mut dyn FnMut(&EpisodeReport)) -> Result<EvalReport>,
+) -> Result<EvalReport> {
+    let bar = ProgressBar::new(episodes).with_style(
         ProgressStyle::with_template(
             "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} episodes, eta {eta} {msg}",
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let mut ok = 0u64;
-    if a.live && a.recordings.is_some() {
-        bail!("--recordings is not available with --live (run `scaledp record` beside it)");
-    }
-    let mut on_episode = |e: &scaledp_deploy::EpisodeReport| {
+    let mut on_episode = |e: &EpisodeReport| {
         ok += u64::from(e.success);
         let outcome = match e.time_to_success_s {
             Some(t) if e.success => format!("success at {t:.1} s"),
@@ -119,38 +221,42 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         bar.inc(1);
         bar.set_message(format!("{ok} successes"));
     };
-    let report = if a.live {
-        // Only this process joins: a session listening on a free loopback port.
-        let port = std::net::TcpListener::bind("127.0.0.1:0")?
-            .local_addr()?
-            .port();
-        let config =
-            scaledp_recorder::net::zenoh_config(None, &[], &[format!("tcp/127.0.0.1:{port}")])?;
-        let session = scaledp_recorder::net::open(config)?;
-        let dev = super::train::device(&a.control.device)?;
-        let dir = policy.dir().to_path_buf();
-        drop(policy);
-        scaledp_deploy::run_live(&dir, &dev, &rig, &opts, &session, &mut on_episode)?
-    } else {
-        run_eval(&policy, &rig, &opts, &mut on_episode)?
-    };
+    let report = f(&mut on_episode);
     bar.finish_and_clear();
+    report
+}
+
+/// Writes the JSON report (`--report`, else `eval-<rig>-seed<S>-n<N>[-expert|-frozen].json` in
+/// `dir`) and prints the summary line.
+fn finish(
+    a: &EvalArgs,
+    report: &EvalReport,
+    rig: &scaledp_schema::Rig,
+    seed: u64,
+    dir: &std::path::Path,
+) -> Result<()> {
+    let suffix = match (a.expert, a.freeze_cameras) {
+        (true, _) => "-expert",
+        (_, true) => "-frozen",
+        _ => "",
+    };
     let path = a.report.clone().unwrap_or_else(|| {
-        std::path::Path::new(&report.checkpoint).join(format!(
-            "eval-{}-seed{}-n{}.json",
-            rig.name, a.seed, a.episodes
+        dir.join(format!(
+            "eval-{}-seed{seed}-n{}{suffix}.json",
+            rig.name, a.episodes
         ))
     });
     report.write(&path)?;
     let ms = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.0}"));
     let [lo, hi] = report.wilson_95;
     println!(
-        "{} episodes of {} (seeds {}..={}): {} successes ({:.1} %, 95 % Wilson {:.1}–{:.1} %), \
+        "{} episodes of {} ({}, seeds {}..={}): {} successes ({:.1} %, 95 % Wilson {:.1}–{:.1} %), \
          mean time to success {}, inference p50 {} ms p99 {} ms{}, {:.1} s wall; report {}",
         report.episodes.len(),
         rig.name,
-        a.seed,
-        a.seed + a.episodes.saturating_sub(1),
+        report.mode,
+        seed,
+        seed + a.episodes.saturating_sub(1),
         report.successes,
         report.success_rate * 100.0,
         lo * 100.0,
@@ -166,16 +272,5 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         report.wall_s,
         path.display()
     );
-    if let (Some(url), Some(dir)) = (&a.view, &opts.recordings) {
-        let rollouts: Vec<String> = report
-            .episodes
-            .iter()
-            .filter_map(|e| e.recording.clone())
-            .collect();
-        if rollouts.is_empty() {
-            bail!("--view: no rollout was recorded in {}", dir.display());
-        }
-        super::view::show(&rollouts, url.as_deref())?;
-    }
-    Ok(ExitStatus::Success)
+    Ok(())
 }

@@ -36,7 +36,7 @@ pub struct PredictArgs {
 
 /// Runs `scaledp predict`.
 pub fn run(a: PredictArgs) -> Result<ExitStatus> {
-    let dev = super::train::device(&a.device)?;
+    let dev = crate::shared::device(&a.device)?;
     let policy = Policy::load(&a.checkpoint, &dev)?;
     let p = predict_episode(&policy, &a.dataset, a.episode, a.batch_size, a.seed)?;
     let (c, dim) = (p.action_chunk, p.action_names.len());

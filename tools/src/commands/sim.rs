@@ -9,8 +9,8 @@ use anyhow::Result;
 use scaledp_schema::Rig;
 use scaledp_sim::{KeyStyle, Pedal, Scene, Sim, SimOptions};
 
-use super::collect::{wilson_interval, Tally};
 use crate::cli::{ExitStatus, KeysArg, OperatorArg, SimArgs};
+use crate::shared::{self, wilson_interval, Successes};
 
 pub fn run(args: SimArgs) -> Result<ExitStatus> {
     let mut rig = Rig::load_or_builtin(&args.rig)?;
@@ -34,7 +34,7 @@ pub fn run(args: SimArgs) -> Result<ExitStatus> {
         scripted || args.episodes.is_none(),
         "--episodes needs --operator scripted"
     );
-    let config = super::zenoh_config(
+    let config = shared::zenoh_config(
         &args.net,
         &[scaledp_recorder::net::DEFAULT_ENDPOINT.to_string()],
     )?;
@@ -52,7 +52,7 @@ pub fn run(args: SimArgs) -> Result<ExitStatus> {
         .autoplay(scripted && args.episodes.is_none())
         .control_prefix(&args.sim_prefix)
         .spawn(&session)?;
-    let stop = super::interrupt_flag();
+    let stop = shared::interrupt_flag();
     let status = match args.episodes {
         Some(n) if scripted => episodes(&sim, &session, &args, n, &stop)?,
         _ => {
@@ -77,7 +77,7 @@ pub fn run(args: SimArgs) -> Result<ExitStatus> {
 fn score(rig: &Rig, seed: u64, n: u64, max_s: f64) -> Result<ExitStatus> {
     let scene = std::sync::Arc::new(Scene::new(rig));
     let start = Instant::now();
-    let mut tally = Tally::default();
+    let mut tally = Successes::default();
     for s in seed..seed + n {
         let r = scaledp_sim::headless::run_on(scene.clone(), s, max_s);
         tally.add(&r.task, r.duration_s);
@@ -119,7 +119,7 @@ fn episodes(
             args.control_prefix.trim_matches('/')
         );
     }
-    let mut tally = Tally::default();
+    let mut tally = Successes::default();
     let started = Instant::now();
     for i in 0..n {
         if stop.load(Ordering::Relaxed) {

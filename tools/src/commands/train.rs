@@ -7,102 +7,106 @@ use std::sync::atomic::Ordering;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use scaledp_policy::model::ScaleDp;
-use scaledp_policy::{
-    AdamWConfig, Event, ModelConfig, ModelSize, StateNorm, TrainOptions, Trainer,
-};
+use scaledp_policy::{Event, ModelConfig, StateNorm, TrainOptions, Trainer};
 
 use crate::cli::ExitStatus;
+use crate::shared;
 
-/// `scaledp train`.
+/// `scaledp train`. Every setting left out takes the preset's value (`--preset`), else the
+/// paper's / diffusion_policy's default shown in brackets.
 #[derive(Debug, Args)]
 pub struct TrainArgs {
     /// The dataset: a directory or s3://bucket/prefix (not needed with --resume, or with
     /// --dry-run for the paper's setup).
     pub dataset: Option<String>,
-    /// Model size: ti, s, b, l or h.
-    #[arg(long, default_value = "ti")]
-    pub model: String,
+    /// A named recipe to start from (cpu-sim: ScaleDP-Ti on the simulated cube task within
+    /// three hours on two CPU cores); the flags below override it one by one.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Model size: ti, s, b, l or h [ti].
+    #[arg(long)]
+    pub model: Option<String>,
     /// Run directory (metrics.jsonl, checkpoints/step_*).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Continue the run in this directory from its latest checkpoint.
     #[arg(long, value_name = "DIR", conflicts_with = "out")]
     pub resume: Option<PathBuf>,
-    /// Optimizer steps in total.
+    /// Optimizer steps in total [10000].
     #[arg(long)]
     pub steps: Option<u64>,
-    /// Samples per step.
-    #[arg(long, default_value_t = 64)]
-    pub batch_size: usize,
+    /// Samples per step [64].
+    #[arg(long)]
+    pub batch_size: Option<usize>,
     /// Forward/backward at most this many samples at a time (same update, less memory).
     #[arg(long)]
     pub micro_batch: Option<usize>,
-    /// Peak learning rate (cosine schedule after the warm-up).
-    #[arg(long, default_value_t = 1e-4)]
-    pub lr: f64,
-    /// Warm-up steps.
-    #[arg(long, default_value_t = 500)]
-    pub warmup_steps: u64,
-    /// Seed of the weights, data order, crops and noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// Peak learning rate, cosine schedule after the warm-up [1e-4].
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Warm-up steps [500].
+    #[arg(long)]
+    pub warmup_steps: Option<u64>,
+    /// Seed of the weights, data order, crops and noise [0].
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// cpu, or cuda (a build with the `cuda` feature of scaledp-policy).
     #[arg(long, default_value = "cpu")]
     pub device: String,
-    /// Checkpoint every N steps (and at the end).
-    #[arg(long, default_value_t = 1000)]
-    pub checkpoint_every: u64,
-    /// Validate every N steps (0: never).
-    #[arg(long, default_value_t = 1000)]
-    pub val_every: u64,
-    /// Fraction of episodes held out for validation.
-    #[arg(long, default_value_t = 0.05)]
-    pub val_ratio: f64,
-    /// Clip the global gradient norm.
+    /// Checkpoint every N steps, and at the start (the untrained weights) and the end [1000].
+    #[arg(long)]
+    pub checkpoint_every: Option<u64>,
+    /// Validate every N steps, 0: never [1000].
+    #[arg(long)]
+    pub val_every: Option<u64>,
+    /// Fraction of episodes held out for validation [0.05].
+    #[arg(long)]
+    pub val_ratio: Option<f64>,
+    /// Clip the global gradient norm [no clipping].
     #[arg(long)]
     pub grad_clip: Option<f64>,
-    /// Crop side / image side (random in training, centred in inference).
-    #[arg(long, default_value_t = 0.9)]
-    pub crop: f64,
-    /// Observation frames per sample, To.
-    #[arg(long, default_value_t = 2)]
-    pub obs_horizon: usize,
-    /// Actions per chunk, C.
-    #[arg(long, default_value_t = 16)]
-    pub action_chunk: usize,
-    /// Resize images to WxH before the crop (e.g. 84x84).
+    /// Crop side / image side, random in training, centred in inference [0.9].
+    #[arg(long)]
+    pub crop: Option<f64>,
+    /// Observation frames per sample, To [2].
+    #[arg(long)]
+    pub obs_horizon: Option<usize>,
+    /// Actions per chunk, C [16].
+    #[arg(long)]
+    pub action_chunk: Option<usize>,
+    /// Resize images to WxH before the crop (e.g. 84x84) [as stored].
     #[arg(long, value_name = "WxH")]
     pub image_size: Option<String>,
-    /// Cameras to use, comma-separated short names (default: all).
+    /// Cameras to use, comma-separated short names [all].
     #[arg(long, value_delimiter = ',')]
     pub cameras: Vec<String>,
-    /// Channels of the ResNet-18 trunks' first stage (64: the paper's encoder; 32 or 16 cost
-    /// 4 or 16 times less).
-    #[arg(long, default_value_t = 64)]
-    pub resnet_width: usize,
+    /// Channels of the ResNet-18 trunks' first stage; 32 or 16 cost 4 or 16 times less [64].
+    #[arg(long)]
+    pub resnet_width: Option<usize>,
     /// (timestep, noise) draws per encoded observation: the encoders run once per sample and
-    /// the denoiser this many times.
-    #[arg(long, default_value_t = 1)]
-    pub noise_samples: usize,
+    /// the denoiser this many times [1].
+    #[arg(long)]
+    pub noise_samples: Option<usize>,
     /// The denoiser's attention over the action chunk: non-causal (ScaleDP) or causal (the
-    /// DP-T-style ablation).
-    #[arg(long, default_value = "non-causal")]
-    pub attention: String,
-    /// Leave action steps past an episode's end out of the loss (default: train on them, as
-    /// diffusion_policy and LeRobot do: they repeat the last action).
+    /// DP-T-style ablation) [non-causal].
+    #[arg(long)]
+    pub attention: Option<String>,
+    /// Leave action steps past an episode's end out of the loss (by default they are trained
+    /// on, as diffusion_policy and LeRobot do: they repeat the last action).
     #[arg(long)]
     pub mask_padding: bool,
     /// The state's normalization: min-max ([-1, 1], diffusion_policy's and LeRobot's) or
-    /// mean-std.
-    #[arg(long, default_value = "min-max")]
-    pub state_norm: String,
-    /// Weight decay of the denoiser's Linear weights (diffusion_policy's
-    /// transformer_weight_decay).
-    #[arg(long, default_value_t = 1e-3)]
-    pub weight_decay: f64,
-    /// Weight decay of every encoder parameter (diffusion_policy's obs_encoder_weight_decay).
-    #[arg(long, default_value_t = 1e-6)]
-    pub encoder_weight_decay: f64,
+    /// mean-std [min-max].
+    #[arg(long)]
+    pub state_norm: Option<String>,
+    /// Weight decay of the denoiser's Linear weights, diffusion_policy's
+    /// transformer_weight_decay [1e-3].
+    #[arg(long)]
+    pub weight_decay: Option<f64>,
+    /// Weight decay of every encoder parameter, diffusion_policy's obs_encoder_weight_decay
+    /// [1e-6].
+    #[arg(long)]
+    pub encoder_weight_decay: Option<f64>,
     /// Print the parameter counts and stop.
     #[arg(long)]
     pub dry_run: bool,
@@ -119,52 +123,46 @@ fn size(s: &str) -> Result<(u32, u32)> {
     Ok((w.parse()?, h.parse()?))
 }
 
-/// The device named on the command line.
-pub(super) fn device(name: &str) -> Result<candle_core::Device> {
-    match name {
-        "cpu" => Ok(candle_core::Device::Cpu),
-        "cuda" => candle_core::Device::new_cuda(0)
-            .context("--device cuda needs a build with `--features scaledp-policy/cuda` and a GPU"),
-        other => bail!("--device {other}: cpu or cuda"),
+/// The run's options: the preset (or the defaults), then every flag given.
+pub fn options(a: &TrainArgs) -> Result<TrainOptions> {
+    let mut o = match &a.preset {
+        Some(p) => TrainOptions::preset(p).with_context(|| {
+            format!(
+                "--preset {p}: one of {}",
+                scaledp_policy::PRESETS.join(", ")
+            )
+        })?,
+        None => TrainOptions::default(),
+    };
+    if let Some(m) = &a.model {
+        o = o.model(m.parse()?);
     }
-}
-
-fn options(a: &TrainArgs, model: ModelSize) -> Result<TrainOptions> {
-    let mut o = TrainOptions::default()
-        .model(model)
-        .batch_size(a.batch_size)
-        .lr(a.lr)
-        .warmup_steps(a.warmup_steps)
-        .seed(a.seed)
-        .checkpoint_every(a.checkpoint_every)
-        .val_every(a.val_every)
-        .val_ratio(a.val_ratio)
-        .crop(a.crop)
-        .obs_horizon(a.obs_horizon)
-        .action_chunk(a.action_chunk)
-        .resnet_width(a.resnet_width)
-        .noise_samples(a.noise_samples)
-        .attention(a.attention.parse()?)
-        .mask_padding(a.mask_padding)
-        .state_norm(match a.state_norm.as_str() {
-            "min-max" | "min_max" => StateNorm::MinMax,
-            "mean-std" | "mean_std" => StateNorm::MeanStd,
-            other => bail!("--state-norm {other}: min-max or mean-std"),
-        })
-        .adamw(AdamWConfig {
-            weight_decay: a.weight_decay,
-            encoder_weight_decay: a.encoder_weight_decay,
-            ..AdamWConfig::default()
-        });
-    if let Some(s) = a.steps {
-        o = o.steps(s);
+    macro_rules! set {
+        ($($field:ident),*) => {$(
+            if let Some(v) = a.$field {
+                o = o.$field(v);
+            }
+        )*};
     }
-    if let Some(m) = a.micro_batch {
-        o = o.micro_batch(m);
-    }
-    if let Some(c) = a.grad_clip {
-        o = o.grad_clip(c);
-    }
+    set!(
+        steps,
+        batch_size,
+        micro_batch,
+        lr,
+        warmup_steps,
+        seed,
+        checkpoint_every,
+        val_every
+    );
+    set!(
+        val_ratio,
+        grad_clip,
+        crop,
+        obs_horizon,
+        action_chunk,
+        resnet_width,
+        noise_samples
+    );
     if let Some(s) = &a.image_size {
         let (w, h) = size(s)?;
         o = o.image_size(w, h);
@@ -172,7 +170,27 @@ fn options(a: &TrainArgs, model: ModelSize) -> Result<TrainOptions> {
     if !a.cameras.is_empty() {
         o = o.cameras(a.cameras.clone());
     }
-    Ok(o)
+    if let Some(at) = &a.attention {
+        o = o.attention(at.parse()?);
+    }
+    if a.mask_padding {
+        o = o.mask_padding(true);
+    }
+    if let Some(n) = &a.state_norm {
+        o = o.state_norm(match n.as_str() {
+            "min-max" | "min_max" => StateNorm::MinMax,
+            "mean-std" | "mean_std" => StateNorm::MeanStd,
+            other => bail!("--state-norm {other}: min-max or mean-std"),
+        });
+    }
+    let mut adamw = o.get_adamw();
+    if let Some(w) = a.weight_decay {
+        adamw.weight_decay = w;
+    }
+    if let Some(w) = a.encoder_weight_decay {
+        adamw.encoder_weight_decay = w;
+    }
+    Ok(o.adamw(adamw))
 }
 
 fn print_counts(what: &str, cfg: &ModelConfig) -> Result<()> {
@@ -206,15 +224,15 @@ fn print_counts(what: &str, cfg: &ModelConfig) -> Result<()> {
 
 /// Runs `scaledp train`.
 pub fn run(a: TrainArgs) -> Result<ExitStatus> {
-    let model: ModelSize = a.model.parse()?;
-    let dev = device(&a.device)?;
-    let opts = options(&a, model)?;
+    let dev = shared::device(&a.device)?;
+    let opts = options(&a)?;
+    let model = opts.get_model();
     let mut trainer = match (&a.resume, &a.dataset) {
         (Some(run), _) => Trainer::resume(run, a.steps, &dev)?,
         (None, None) if a.dry_run => {
             let mut cfg = ModelConfig::paper(model);
-            cfg.obs_horizon = a.obs_horizon;
-            cfg.action_chunk = a.action_chunk;
+            cfg.obs_horizon = a.obs_horizon.unwrap_or(cfg.obs_horizon);
+            cfg.action_chunk = a.action_chunk.unwrap_or(cfg.action_chunk);
             print_counts("paper setup (3 cameras, 14-D state and action)", &cfg)?;
             return Ok(ExitStatus::Success);
         }
@@ -237,14 +255,14 @@ pub fn run(a: TrainArgs) -> Result<ExitStatus> {
         return Ok(ExitStatus::Success);
     }
     let stop = trainer.stop_flag();
-    let int = super::interrupt_flag();
+    let int = shared::interrupt_flag();
     let total = trainer.options().get_steps();
     let bar = indicatif::ProgressBar::new(total).with_position(trainer.step_count());
     bar.set_style(indicatif::ProgressStyle::with_template(
         "{bar:30} {pos}/{len} steps  {msg}  [{elapsed_precise} < {eta_precise}]",
     )?);
     let curves = match &a.view {
-        Some(url) => Some(super::view::curves::Curves::start(
+        Some(url) => Some(shared::viewer::curves::Curves::start(
             url.as_deref(),
             &trainer.config().dataset,
         )?),

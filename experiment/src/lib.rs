@@ -1,0 +1,298 @@
+//! `scaledp experiment`: the paper's comparisons at one machine's scale. ScaleDP-Ti with
+//! non-causal attention (the recipe), the same with causal attention (the DP-T-style ablation)
+//! and ScaleDP-S, each trained with one recipe on the same demonstrations, each checkpoint
+//! scored in closed loop on the validation seeds, the best one scored on the test seeds — with
+//! the recipe's arm also in real time and beside its controls (untrained weights, frozen
+//! cameras, the scripted expert).
+//!
+//! Arms run one after the other and each resumes where it stopped (training from its last
+//! checkpoint, evaluations from their cache files), so an arm can finish in one sitting on a
+//! machine that may be gone the next day: its result file (`RESULTS/NAME/<arm>.json`) is
+//! written as it lands, and the table (`table.md`) and plot (`success_vs_step.svg`) are rebuilt
+//! from the arms that are there. Checkpoints stay under `RUNS/NAME` (never committed).
+//!
+//! Errors are `anyhow`: an application in library form, reported once by the CLI.
+
+mod args;
+mod arms;
+mod evaluate;
+mod plot;
+mod results;
+mod train;
+
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use scaledp_deploy::Split;
+use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
+
+pub use args::{CompareArgs, ExperimentCommand, ReportArgs};
+pub use arms::{Arm, ARMS};
+pub use results::{ArmResult, EvalFigures};
+
+use evaluate::{EvalPlan, Kind};
+use results::{Controls, Provenance, ValPoint};
+
+/// Runs one `scaledp experiment` command; `stop` (set by Ctrl-C) checkpoints a training run and
+/// returns.
+pub fn run(command: ExperimentCommand, stop: &Arc<AtomicBool>) -> Result<()> {
+    match command {
+        ExperimentCommand::Compare(a) => compare(&a, stop),
+        ExperimentCommand::Report(a) => rebuild(&a.results.join(&a.name)).map(|_| ()),
+    }
+}
+
+/// The recipe with the command's overrides.
+fn recipe(a: &CompareArgs) -> Result<TrainOptions> {
+    let mut o = TrainOptions::preset(&a.preset).with_context(|| {
+        format!(
+            "--preset {}: one of {}",
+            a.preset,
+            scaledp_policy::PRESETS.join(", ")
+        )
+    })?;
+    if let Some(s) = a.steps {
+        o = o.steps(s);
+    }
+    if let Some(c) = a.checkpoint_every {
+        o = o.checkpoint_every(c);
+    }
+    if let Some(b) = a.batch_size {
+        o = o.batch_size(b);
+    }
+    if o.get_checkpoint_every() == 0 {
+        bail!("the experiment evaluates every checkpoint: --checkpoint-every must be at least 1");
+    }
+    Ok(o)
+}
+
+/// The command line that reproduces this run of `compare` for one arm.
+fn command(a: &CompareArgs, arm: &str) -> String {
+    let mut s = format!(
+        "scaledp experiment compare --dataset {} --name {} --arms {arm} --preset {} --val-episodes {} --test-episodes {} --live-episodes {} --max-seconds {} --action-steps {}",
+        a.dataset, a.name, a.preset, a.val_episodes, a.test_episodes, a.live_episodes, a.max_seconds, a.action_steps
+    );
+    for (flag, v) in [
+        ("--steps", a.steps),
+        ("--checkpoint-every", a.checkpoint_every),
+    ] {
+        if let Some(v) = v {
+            s.push_str(&format!(" {flag} {v}"));
+        }
+    }
+    if let Some(b) = a.batch_size {
+        s.push_str(&format!(" --batch-size {b}"));
+    }
+    if a.no_controls {
+        s.push_str(" --no-controls");
+    }
+    s
+}
+
+fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
+    let results_dir = a.results.join(&a.name);
+    let runs_dir = a.runs.join(&a.name);
+    std::fs::create_dir_all(&results_dir)
+        .with_context(|| format!("creating {}", results_dir.display()))?;
+    let base = recipe(a)?;
+    let arms = a
+        .arms
+        .iter()
+        .map(|n| arms::arm(n).with_context(|| format!("--arms {n}: one of ti, ti-causal, s")))
+        .collect::<Result<Vec<_>>>()?;
+    let plan = EvalPlan {
+        max_seconds: a.max_seconds,
+        action_steps: a.action_steps,
+    };
+    for arm in arms {
+        eprintln!("== arm {}: {}", arm.name, arm.what);
+        let opts = base.clone().model(arm.size).attention(arm.attention);
+        let run = runs_dir.join(arm.name);
+        let trained = train::train(&a.dataset, &run, opts.clone(), stop)?;
+        if trained.interrupted {
+            eprintln!(
+                "stopped at step {}: the same command resumes it",
+                trained.steps
+            );
+            return Ok(());
+        }
+        let result = evaluate_arm(a, arm, &run, &opts, &plan, trained)?;
+        let path = results_dir.join(format!("{}.json", arm.name));
+        std::fs::write(&path, serde_json::to_vec_pretty(&result)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "{}: test {} after {} steps ({:.2} h of training); {}",
+            arm.name,
+            result.test.cell(),
+            result.steps,
+            result.train_hours,
+            path.display()
+        );
+        rebuild(&results_dir)?;
+    }
+    Ok(())
+}
+
+fn evaluate_arm(
+    a: &CompareArgs,
+    arm: Arm,
+    run: &std::path::Path,
+    opts: &TrainOptions,
+    plan: &EvalPlan,
+    trained: train::Trained,
+) -> Result<ArmResult> {
+    let ckpts = evaluate::checkpoints(run)?;
+    let mut validation = Vec::new();
+    for (step, dir) in &ckpts {
+        let r = evaluate::checkpoint(dir, None, Kind::Policy, Split::Val, a.val_episodes, plan)?;
+        eprintln!(
+            "  step {step}: {}/{} on the validation seeds",
+            r.successes,
+            r.episodes.len()
+        );
+        validation.push(ValPoint {
+            step: *step,
+            successes: r.successes,
+            episodes: r.episodes.len() as u64,
+            success_rate: r.success_rate,
+        });
+    }
+    let pairs: Vec<(u64, u64)> = validation.iter().map(|v| (v.step, v.successes)).collect();
+    let selected = evaluate::select(&pairs).context("the run has no checkpoint to evaluate")?;
+    let best = ckpts
+        .iter()
+        .find(|c| c.0 == selected)
+        .map(|c| c.1.clone())
+        .context("the chosen checkpoint vanished")?;
+    let test = evaluate::checkpoint(
+        &best,
+        None,
+        Kind::Policy,
+        Split::Test,
+        a.test_episodes,
+        plan,
+    )?;
+    let recipe_arm = arm.name == ARMS[0].name;
+    let mut controls = Controls::default();
+    let policy = Policy::load(&best, &candle_core::Device::Cpu)?;
+    let rig = evaluate::trained_rig(&policy)?;
+    if recipe_arm && !a.no_controls {
+        if let Some((_, untrained)) = ckpts.iter().find(|c| c.0 == 0) {
+            let r = evaluate::checkpoint(
+                untrained,
+                None,
+                Kind::Policy,
+                Split::Test,
+                a.test_episodes,
+                plan,
+            )?;
+            controls.untrained = Some(EvalFigures::of(&r));
+        }
+        let r = evaluate::checkpoint(
+            &best,
+            None,
+            Kind::Frozen,
+            Split::Test,
+            a.test_episodes,
+            plan,
+        )?;
+        controls.frozen_cameras = Some(EvalFigures::of(&r));
+        let r = evaluate::expert(
+            run.parent().unwrap_or(run),
+            &rig,
+            Split::Test,
+            a.test_episodes,
+            plan,
+        )?;
+        controls.scripted_expert = Some(EvalFigures::of(&r));
+    }
+    let live = if recipe_arm && a.live_episodes > 0 {
+        let r = evaluate::checkpoint(
+            &best,
+            Some(&rig),
+            Kind::Live,
+            Split::Test,
+            a.live_episodes,
+            plan,
+        )?;
+        Some(EvalFigures::of(&r))
+    } else {
+        None
+    };
+    let counts = ScaleDp::count(&policy.config().model)?;
+    let times = train::step_times(run)?;
+    let figures = EvalFigures::of(&test);
+    Ok(ArmResult {
+        arm: arm.name.into(),
+        what: arm.what.into(),
+        command: command(a, arm.name),
+        train_command: format!(
+            "scaledp train {} --preset {} --model {} --attention {} --steps {} --checkpoint-every {} --batch-size {} --out {}",
+            a.dataset,
+            a.preset,
+            arm.size,
+            arm.attention,
+            opts.get_steps(),
+            opts.get_checkpoint_every(),
+            opts.get_batch_size(),
+            run.display()
+        ),
+        train_options: serde_json::to_value(opts)?,
+        dataset: a.dataset.clone(),
+        steps: trained.steps,
+        train_hours: trained.hours,
+        step_s: times.iter().sum::<f64>() / times.len().max(1) as f64,
+        denoiser_params: counts.denoiser,
+        encoder_params: counts.encoders,
+        validation,
+        selected_step: selected,
+        test_success_rate: figures.success_rate,
+        test_seeds: (0..a.test_episodes).map(|i| test.seed + i).collect(),
+        wilson_low: figures.wilson_low,
+        wilson_high: figures.wilson_high,
+        test: figures,
+        live,
+        controls,
+        provenance: Provenance {
+            git_revision: results::git_revision(),
+            machine: results::machine(),
+            finished_utc: results::now_utc(),
+        },
+    })
+}
+
+/// Rebuilds `table.md` and `success_vs_step.svg` in `dir` from the arm results there.
+fn rebuild(dir: &std::path::Path) -> Result<Vec<ArmResult>> {
+    let arms = results::read_all(dir)?;
+    if arms.is_empty() {
+        bail!(
+            "{}: no arm results (run `scaledp experiment compare` first)",
+            dir.display()
+        );
+    }
+    let mut md = String::from(
+        "# Results\n\nRebuilt by `scaledp experiment report` from the arm files beside it.\n\n",
+    );
+    md.push_str(&results::table(&arms));
+    md.push_str("\n| arm | commit | machine | finished | command |\n|---|---|---|---|---|\n");
+    for a in &arms {
+        md.push_str(&format!(
+            "| {} | `{}` | {} | {} | `{}` |\n",
+            a.arm,
+            a.provenance.git_revision,
+            a.provenance.machine,
+            a.provenance.finished_utc,
+            a.command
+        ));
+    }
+    std::fs::write(dir.join("table.md"), md)
+        .with_context(|| format!("writing {}/table.md", dir.display()))?;
+    plot::success_vs_step(&arms, &dir.join("success_vs_step.svg"))?;
+    eprintln!(
+        "rebuilt {}/table.md and success_vs_step.svg from {} arms",
+        dir.display(),
+        arms.len()
+    );
+    Ok(arms)
+}
