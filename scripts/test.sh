@@ -28,7 +28,8 @@ bash scripts/setup-python.sh
 step "python peers (.venv)"
 
 # LeRobot 0.4.4 and torch (several GB from PyPI, kept in .venv-bench between runs): the video
-# conformance tests read what LeRobot itself writes and returns.
+# conformance tests read what LeRobot itself writes and returns, and the PyTorch route's tests
+# (tests/tests/torch_route) train with this torch: one copy of it for both.
 bash scripts/setup-bench-python.sh
 step "lerobot (.venv-bench)"
 

@@ -74,6 +74,9 @@ pub fn step_draws(
     d
 }
 
+/// Gradients by weight name, in the model's order.
+pub type NamedGrads = Vec<(String, Vec<f32>)>;
+
 /// The loss and the gradient of every weight (by name, in the model's order) that training
 /// step `step` of a run seeded `seed` computes on `batch` — the trainer's own function and
 /// generator (on the CPU: the CPU engine).
@@ -85,7 +88,7 @@ pub fn step_loss_and_grads(
     micro: Option<usize>,
     seed: u64,
     step: u64,
-) -> Result<(f32, Vec<(String, Vec<f32>)>)> {
+) -> Result<(f32, NamedGrads)> {
     let tensors = model
         .weights()
         .iter()

@@ -1,4 +1,4 @@
-//! The cluster scripts (`scripts/cluster/`): the Slurm array script and the Kubernetes Indexed
+//! The cluster scripts (`cluster/`): the Slurm array script and the Kubernetes Indexed
 //! Job manifest pass their checkers (ShellCheck and `bash -n`; a YAML parse and Kubernetes
 //! 1.31's schemas in strict mode), and run as local processes — one per array task or Job
 //! index, with the variables Slurm and Kubernetes set — against a real S3 endpoint, their
@@ -39,8 +39,8 @@ fn path_with(dir: &Path) -> std::ffi::OsString {
 #[test]
 fn slurm_and_kubernetes_shards_merge_into_one_run() {
     let root = workspace();
-    let manifest = root.join("scripts/cluster/convert-job.yaml");
-    let sbatch = root.join("scripts/cluster/convert.sbatch");
+    let manifest = root.join("cluster/kubernetes/convert-job.yaml");
+    let sbatch = root.join("cluster/slurm/convert.sbatch");
     let checked = run_python("check_cluster.py", &[&manifest, &sbatch]);
     // The checkers do fail on a broken file.
     let dir = tempfile::tempdir().unwrap();

@@ -226,7 +226,7 @@ mod tests {
     /// on the shapes where height and width leave different remainders: the input gradient,
     /// the kernel gradient and the output agree.
     #[test]
-    fn non_square_strided_convolutions_have_the_right_gradients() -> candle_core::Result<()> {
+    fn non_square_strided_convolutions_have_the_right_gradients() -> crate::Result<()> {
         let dev = Device::Cpu;
         // (h, w, k, stride, padding): layer3 and its downsample at the 288×216 crop, the same
         // transposed, the stem at 72×41 (the tests' crop), a stride-1 case.

@@ -3,7 +3,8 @@
 //! (2 ranks equal 1 process; disjoint shares; kill and resume), checkpoints moving between the
 //! trainers and into `scaledp eval`, and the launch recipes' syntax.
 //!
-//! Needs the tests' `.venv` with torch (`scripts/setup-python.sh`) and the wheel
+//! Needs torch: the one LeRobot brings into `.venv-bench` (`scripts/setup-bench-python.sh`,
+//! torch 2.10.0; one copy of torch's gigabytes serves the video and the PyTorch tests), and the wheel
 //! (`scripts/build-python.sh`), unpacked onto `PYTHONPATH`. Every run is a tiny model (2 blocks
 //! of width 32, ResNet width 8) on a small simulated dataset, and every child is bounded in time.
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
@@ -18,7 +19,14 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use scaledp_tests::{convert_ok, python, synth_episode, workspace, write_rig_file};
+use scaledp_tests::{convert_ok, synth_episode, workspace, write_rig_file};
+
+/// The Python with torch ([`scaledp_testkit::BENCH_VENV`]).
+pub fn python() -> PathBuf {
+    scaledp_testkit::BENCH_VENV
+        .python(None, Some(&workspace()))
+        .unwrap_or_else(|e| panic!("{e} (scripts/test.sh does)"))
+}
 
 /// The light simulated Franka cell: 80×45 cameras (non-square crops: 72×41), a 250 Hz arm.
 pub fn light_rig() -> scaledp_schema::Rig {

@@ -8,10 +8,10 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use scaledp_tests::{python, workspace};
+use scaledp_tests::workspace;
 use serde_json::Value;
 
-use super::{checkpoint, fixture, py, run_ok, script, TINY};
+use super::{checkpoint, fixture, py, python, run_ok, script, TINY};
 
 const LIMIT: Duration = Duration::from_secs(300);
 
@@ -120,4 +120,38 @@ fn the_kubernetes_manifest_is_a_pytorchjob_whose_command_the_trainer_takes() {
     let v: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["errors"], serde_json::json!([]), "{v}");
     assert!(v["commands"].as_array().unwrap().len() >= 2, "{v}");
+}
+
+/// `python -m scaledp_data.train`'s options from `args` (no dataset is opened).
+fn python_options(args: &[&str]) -> Value {
+    let code = "import argparse, json, sys\n\
+                from scaledp_data.policy.options import add_arguments, options_from_args\n\
+                p = argparse.ArgumentParser()\n\
+                add_arguments(p)\n\
+                print(json.dumps(options_from_args(p.parse_args(sys.argv[1:]))))";
+    let mut cmd = py();
+    cmd.arg("-c").arg(code).args(args);
+    let out = run_ok(cmd, LIMIT);
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// A command line moves between the trainers unchanged: the defaults and the `cpu-sim` preset
+/// (with a flag overriding it) give the Rust trainer's options, field by field.
+#[test]
+fn the_defaults_and_the_presets_are_the_rust_trainers() {
+    use scaledp_policy::TrainOptions;
+    let rust = |o: TrainOptions| serde_json::to_value(o).unwrap();
+    let keys = |v: &Value| -> Vec<String> { v.as_object().unwrap().keys().cloned().collect() };
+    let def = rust(TrainOptions::default());
+    let py_def = python_options(&["ds"]);
+    for k in keys(&py_def) {
+        assert_eq!(py_def[&k], def[&k], "default of {k}");
+    }
+    let preset = rust(TrainOptions::preset("cpu-sim").unwrap().lr(1e-3));
+    let py_preset = python_options(&["ds", "--preset", "cpu-sim", "--lr", "1e-3"]);
+    for k in keys(&py_preset) {
+        assert_eq!(py_preset[&k], preset[&k], "cpu-sim's {k}");
+    }
+    assert_eq!(py_preset["resnet_width"], 32);
+    assert_eq!(py_preset["lr"], 1e-3);
 }

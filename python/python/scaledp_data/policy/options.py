@@ -9,12 +9,20 @@ import argparse
 import math
 from typing import Any, Dict, Optional, Tuple
 
-__all__ = ["MODEL_SIZES", "add_arguments", "default_options", "options_from_args", "cosine_lr",
+__all__ = ["MODEL_SIZES", "PRESETS", "add_arguments", "default_options", "options_from_args", "cosine_lr",
            "ema_decay"]
 
 #: The paper's sizes: depth, width, heads.
 MODEL_SIZES = {"ti": (8, 256, 4), "s": (12, 384, 6), "b": (12, 768, 12), "l": (24, 1024, 16),
                "h": (32, 1280, 16)}
+
+
+#: ``TrainOptions::preset`` (policy/src/trainer/presets.rs): what each named recipe changes.
+PRESETS: Dict[str, Dict[str, Any]] = {
+    "cpu-sim": {"resnet_width": 32, "noise_samples": 2, "batch_size": 64, "lr": 3e-4,
+                "warmup_steps": 500, "steps": 3000, "checkpoint_every": 500, "val_ratio": 0.0,
+                "val_every": 0},
+}
 
 
 def default_options() -> Dict[str, Any]:
@@ -54,26 +62,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of ``scaledp train`` (tools/src/commands/train.rs), same names and defaults."""
     p.add_argument("dataset", nargs="?", help="the dataset: a directory or s3://bucket/prefix "
                    "(not needed with --resume)")
+    p.add_argument("--preset", choices=sorted(PRESETS), help="a named recipe to start from "
+                   "(cpu-sim: ScaleDP-Ti on the simulated cube task within three hours on two "
+                   "CPU cores); the other flags override it one by one")
     p.add_argument("--model", default="ti", help="model size: ti, s, b, l or h")
     p.add_argument("--out", metavar="DIR", help="run directory (metrics.jsonl, checkpoints/step_*)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in this directory from its "
                    "latest checkpoint")
     p.add_argument("--steps", type=int, help="optimizer steps in total (default 10000)")
-    p.add_argument("--batch-size", type=int, default=64,
-                   help="samples per step: the global batch, split evenly over the ranks")
+    p.add_argument("--batch-size", type=int,
+                   help="samples per step: the global batch, split evenly over the ranks [64]")
     p.add_argument("--micro-batch", type=int, help="forward/backward at most this many samples "
                    "at a time per rank (same update, less memory)")
-    p.add_argument("--lr", type=float, default=1e-4, help="peak learning rate")
-    p.add_argument("--warmup-steps", type=int, default=500, help="warm-up steps")
+    p.add_argument("--lr", type=float, help="peak learning rate [1e-4]")
+    p.add_argument("--warmup-steps", type=int, help="warm-up steps [500]")
     p.add_argument("--seed", type=int, default=0, help="seed of the weights, data order, crops "
                    "and noise")
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default: cuda when "
                    "available: NCCL across the ranks, else the CPU and gloo)")
-    p.add_argument("--checkpoint-every", type=int, default=1000, help="checkpoint every N steps "
-                   "(and at the end)")
-    p.add_argument("--val-every", type=int, default=1000, help="validate every N steps (0: never)")
-    p.add_argument("--val-ratio", type=float, default=0.05, help="fraction of episodes held out "
-                   "for validation")
+    p.add_argument("--checkpoint-every", type=int, help="checkpoint every N steps "
+                   "(and at the end) [1000]")
+    p.add_argument("--val-every", type=int, help="validate every N steps (0: never) [1000]")
+    p.add_argument("--val-ratio", type=float, help="fraction of episodes held out "
+                   "for validation [0.05]")
     p.add_argument("--grad-clip", type=float, help="clip the global gradient norm")
     p.add_argument("--crop", type=float, default=0.9, help="crop side / image side (random in "
                    "training, centred in inference)")
@@ -83,10 +94,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "the crop (e.g. 84x84)")
     p.add_argument("--cameras", type=lambda s: [c for c in s.split(",") if c], default=[],
                    help="cameras to use, comma-separated short names (default: all)")
-    p.add_argument("--resnet-width", type=int, default=64, help="channels of the ResNet-18 trunks' "
-                   "first stage (64: the paper's encoder)")
-    p.add_argument("--noise-samples", type=int, default=1, help="(timestep, noise) draws per "
-                   "encoded observation")
+    p.add_argument("--resnet-width", type=int, help="channels of the ResNet-18 trunks' "
+                   "first stage (64: the paper's encoder) [64]")
+    p.add_argument("--noise-samples", type=int, help="(timestep, noise) draws per "
+                   "encoded observation [1]")
     p.add_argument("--attention", default="non-causal", help="non-causal (ScaleDP) or causal "
                    "(the DP-T-style ablation)")
     p.add_argument("--mask-padding", action="store_true", help="leave action steps past an "
@@ -126,15 +137,21 @@ def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
     if state_norm is None:
         raise ValueError(f"--state-norm {a.state_norm}: min-max or mean-std")
     o = default_options()
-    o.update({
-        "size": a.model.lower(), "batch_size": a.batch_size, "lr": a.lr,
-        "warmup_steps": a.warmup_steps, "seed": a.seed, "checkpoint_every": a.checkpoint_every,
-        "val_every": a.val_every, "val_ratio": a.val_ratio, "crop": a.crop,
-        "obs_horizon": a.obs_horizon, "action_chunk": a.action_chunk,
-        "resnet_width": a.resnet_width, "attention": _attention(a.attention),
-        "state_norm": state_norm,
-    })
-    o["loss"] = {"noise_samples": max(1, a.noise_samples), "mask_padding": bool(a.mask_padding)}
+    preset = getattr(a, "preset", None)
+    if preset is not None:
+        if preset not in PRESETS:
+            raise ValueError(f"--preset {preset}: one of {', '.join(sorted(PRESETS))}")
+        o.update({k: v for k, v in PRESETS[preset].items() if k != "noise_samples"})
+        o["loss"] = dict(o["loss"], noise_samples=PRESETS[preset].get("noise_samples", 1))
+    o.update({"size": a.model.lower(), "seed": a.seed, "crop": a.crop,
+              "obs_horizon": a.obs_horizon, "action_chunk": a.action_chunk,
+              "attention": _attention(a.attention), "state_norm": state_norm})
+    for key in ("batch_size", "lr", "warmup_steps", "checkpoint_every", "val_every",
+                "val_ratio", "resnet_width"):
+        if getattr(a, key, None) is not None:
+            o[key] = getattr(a, key)
+    k = a.noise_samples if getattr(a, "noise_samples", None) is not None else o["loss"]["noise_samples"]
+    o["loss"] = {"noise_samples": max(1, k), "mask_padding": bool(a.mask_padding)}
     o["adamw"] = dict(o["adamw"], weight_decay=a.weight_decay,
                       encoder_weight_decay=a.encoder_weight_decay)
     if a.steps is not None:
