@@ -281,8 +281,11 @@ fn a_killed_dataset_is_valid_before_any_repair() {
     let inp = dir.path().join("in");
     std::fs::create_dir_all(&inp).unwrap();
     let rig = small_franka();
+    // Episodes long enough that converting one takes longer than the longest settle time, so
+    // the kill lands while the next episode converts and not inside the commit after it (3 s
+    // episodes converted in ~50 ms each, and a kill 140 ms late met a later commit's renames).
     for i in 0..5 {
-        synth_episode(&inp.join(format!("episode_{i:06}.mcap")), &rig, i, 3.0);
+        synth_episode(&inp.join(format!("episode_{i:06}.mcap")), &rig, i, 12.0);
     }
     for (target, settle_ms) in [(1usize, 20u64), (2, 60), (3, 140)] {
         let ds = dir.path().join(format!("ds{target}"));
