@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Builds `scaledp` with candle's CUDA backend (`--features scaledp-policy/cuda`) on a machine with
+# neither a GPU nor a CUDA install: nvcc, the CUDA headers and the libraries to link against come
+# from NVIDIA's wheels on PyPI (CUDA 12.8, the set torch 2.10 uses) in target/cuda-sdk; the
+# driver library, which only a GPU machine has, is replaced at link time by a stub exporting the
+# driver API cudarc calls (the real libcuda.so.1 is loaded on the GPU machine at run time). The
+# kernels are compiled for CUDA_COMPUTE_CAP (default 80: A100; 90 for H100), into their own
+# target dir (CARGO_TARGET_DIR, default target/cuda) so the CPU build is untouched.
+#
+#   bash scripts/build-cuda.sh            # -> target/cuda/release/scaledp
+#
+# Run the result where the NVIDIA driver is installed, with the wheels' libraries on the path:
+#   LD_LIBRARY_PATH=target/cuda-sdk/lib target/cuda/release/scaledp train DATASET --device cuda ...
+set -euo pipefail
+cd "$(dirname "$0")/.."
+export CUDA_COMPUTE_CAP=${CUDA_COMPUTE_CAP:-80}
+export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-target/cuda}
+SDK=$PWD/target/cuda-sdk
+PY=${PYTHON:-python3}
+CUDA_WHEELS=(nvidia-cuda-nvcc-cu12==12.8.93 nvidia-cuda-runtime-cu12==12.8.90
+  nvidia-cuda-nvrtc-cu12==12.8.93 nvidia-cublas-cu12==12.8.4.1 nvidia-curand-cu12==10.3.9.90)
+
+[ -x "$SDK/venv/bin/python" ] || "$PY" -m venv "$SDK/venv"
+"$SDK/venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps "${CUDA_WHEELS[@]}"
+NV=$("$SDK/venv/bin/python" -c 'import nvidia; print(nvidia.__path__[0])')
+
+# A CUDA_HOME-shaped tree: nvcc, every wheel's headers, unversioned names of the libraries.
+rm -rf "${SDK:?}/include" "${SDK:?}/lib" && mkdir -p "$SDK/include" "$SDK/lib"
+for d in "$NV"/*/include; do cp -rs "$d"/. "$SDK/include/" 2>/dev/null || true; done
+for so in "$NV"/*/lib/lib*.so.*; do
+  base=$(basename "$so")
+  ln -sf "$so" "$SDK/lib/$base"
+  ln -sf "$so" "$SDK/lib/${base%%.so.*}.so"
+done
+
+# The driver stub: every cu* function cudarc's driver bindings declare, as an empty symbol.
+cargo fetch --locked --quiet
+CUDARC=$(sed -n '/^name = "cudarc"/{n;s/version = "\(.*\)"/\1/p}' Cargo.lock | head -n 1)
+SYS=$(ls -d "${CARGO_HOME:-$HOME/.cargo}"/registry/src/*/"cudarc-$CUDARC"/src/driver/sys | head -n 1)
+grep -A2 'extern "C" {' "$SYS/mod.rs" | grep -o 'fn cu[A-Za-z0-9_]*' | sed 's/^fn //' | sort -u \
+  | sed 's/.*/void &(void) {}/' > "$SDK/cuda_stub.c"
+cc -shared -fPIC -Wl,-soname,libcuda.so.1 -o "$SDK/lib/libcuda.so" "$SDK/cuda_stub.c"
+echo "driver stub: $(wc -l < "$SDK/cuda_stub.c") symbols of cudarc $CUDARC"
+
+export CUDA_HOME=$SDK CUDA_PATH=$SDK
+export PATH="$NV/cuda_nvcc/bin:$PATH"
+export NVCC_APPEND_FLAGS="-I$SDK/include"
+export LIBRARY_PATH="$SDK/lib${LIBRARY_PATH:+:$LIBRARY_PATH}"
+nvcc --version | tail -n 2
+start=$(date +%s)
+cargo build --release --locked --workspace --bins --features scaledp-policy/cuda
+echo "built $CARGO_TARGET_DIR/release/scaledp with CUDA (compute capability $CUDA_COMPUTE_CAP) in $(( $(date +%s) - start )) s"
