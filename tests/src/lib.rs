@@ -211,3 +211,15 @@ pub fn episode_metadata(path: &Path) -> std::collections::BTreeMap<String, Strin
         .expect("a metadata record")
         .metadata
 }
+
+/// Waits until `path` exists, at most `limit` (polled every 20 ms).
+///
+/// # Panics
+/// When it does not appear in time, saying `what` was awaited.
+pub fn await_file(path: &std::path::Path, limit: std::time::Duration, what: &str) {
+    let deadline = std::time::Instant::now() + limit;
+    while !path.exists() {
+        assert!(std::time::Instant::now() < deadline, "{what}");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}

@@ -5,7 +5,7 @@
 //! and every object under a prefix read back.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Arc, OnceLock};
 
@@ -91,17 +91,8 @@ impl S3Env {
     /// Uploads every file under `dir` to `url`/<relative path>.
     pub fn upload_dir(&self, dir: &Path, url: &ObjectUrl) {
         let bucket = self.bucket(&url.bucket);
-        let mut stack = vec![dir.to_path_buf()];
-        while let Some(d) = stack.pop() {
-            for e in std::fs::read_dir(&d).expect("a directory").flatten() {
-                let p = e.path();
-                if p.is_dir() {
-                    stack.push(p);
-                } else {
-                    let rel = p.strip_prefix(dir).expect("under dir").to_string_lossy();
-                    bucket.upload(&p, &url.join(&rel)).expect("an upload");
-                }
-            }
+        for (rel, p) in walk(dir) {
+            bucket.upload(&p, &url.join(&rel)).expect("an upload");
         }
     }
 
@@ -137,7 +128,15 @@ pub fn url(bucket: &str, key: &str) -> ObjectUrl {
 
 /// Every file under `dir`, by path relative to it (as [`S3Env::objects`] lists a prefix).
 pub fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
-    let mut out = BTreeMap::new();
+    walk(dir)
+        .into_iter()
+        .map(|(rel, p)| (rel, std::fs::read(&p).expect("a file")))
+        .collect()
+}
+
+/// Every file under `dir`: its path relative to `dir` and its path.
+fn walk(dir: &Path) -> Vec<(String, PathBuf)> {
+    let mut out = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
         for e in std::fs::read_dir(&d).expect("a directory").flatten() {
@@ -145,12 +144,8 @@ pub fn files(dir: &Path) -> BTreeMap<String, Vec<u8>> {
             if p.is_dir() {
                 stack.push(p);
             } else {
-                let rel = p
-                    .strip_prefix(dir)
-                    .expect("under dir")
-                    .to_string_lossy()
-                    .into_owned();
-                out.insert(rel, std::fs::read(&p).expect("a file"));
+                let rel = p.strip_prefix(dir).expect("under dir").to_string_lossy();
+                out.push((rel.into_owned(), p));
             }
         }
     }

@@ -8,7 +8,7 @@
 
 use std::collections::BTreeMap;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use scaledp_recorder::net;
 use scaledp_schema::msg::CompressedVideo;
@@ -53,14 +53,11 @@ fn h264_cameras_record_recover_and_decode() {
         .spawn()
         .unwrap();
     let partial = out.join("episode_000000.mcap.partial");
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while !partial.exists() {
-        assert!(
-            Instant::now() < deadline,
-            "recorder never opened an episode"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    scaledp_tests::await_file(
+        &partial,
+        Duration::from_secs(20),
+        "recorder never opened an episode",
+    );
     std::thread::sleep(Duration::from_millis(2500));
     child.kill().unwrap();
     child.wait().unwrap();

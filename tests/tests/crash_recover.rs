@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use scaledp_recorder::{net, now_ns};
 use scaledp_sim::SimOptions;
@@ -45,14 +45,11 @@ fn kill_9_then_recover_loses_at_most_one_second() {
         .spawn()
         .unwrap();
     let partial = out.join("episode_000000.mcap.partial");
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while !partial.exists() {
-        assert!(
-            Instant::now() < deadline,
-            "recorder never opened an episode"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    scaledp_tests::await_file(
+        &partial,
+        Duration::from_secs(20),
+        "recorder never opened an episode",
+    );
     std::thread::sleep(Duration::from_millis(2500));
     child.kill().unwrap(); // SIGKILL: no destructor, no flush, no rename
     let killed_ns = now_ns();

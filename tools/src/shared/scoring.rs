@@ -39,20 +39,3 @@ impl Successes {
 
 /// The 95 % Wilson score interval (one definition, shared with `scaledp eval`).
 pub use scaledp_deploy::wilson_interval;
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn wilson_intervals_match_the_textbook() {
-        // 80 of 100: 71.1–86.7 %; 100 of 100: 96.3–100 %.
-        let (lo, hi) = wilson_interval(80, 100);
-        assert!(
-            (lo - 0.7112).abs() < 1e-3 && (hi - 0.8666).abs() < 1e-3,
-            "{lo} {hi}"
-        );
-        let (lo, hi) = wilson_interval(100, 100);
-        assert!((lo - 0.9630).abs() < 1e-3 && hi == 1.0, "{lo} {hi}");
-    }
-}
