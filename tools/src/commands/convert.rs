@@ -1,6 +1,6 @@
 //! `scaledp convert` and `scaledp dataset merge`, local or on object storage.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
@@ -12,11 +12,7 @@ use scaledp_converter::{
 use scaledp_schema::Rig;
 
 use crate::cli::{ConvertArgs, ExitStatus, MergeArgs};
-
-/// A command-line path or `s3://` URL.
-pub(crate) fn location(arg: &Path) -> Result<Location> {
-    Ok(Location::parse(arg.as_os_str())?)
-}
+use crate::shared::location;
 
 pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
     let rig = args.rig.as_deref().map(Rig::load_or_builtin).transpose()?;

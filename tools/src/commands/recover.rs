@@ -9,7 +9,7 @@ use scaledp_converter::{Location, ObjectUrl};
 use scaledp_store::Bucket;
 
 use crate::cli::{ExitStatus, RecoverArgs};
-use crate::commands::convert::location;
+use crate::shared::location;
 
 /// The default output of `input`: its name without `.partial`, or `<stem>.recovered.mcap`.
 fn default_output(input: &Location) -> Location {

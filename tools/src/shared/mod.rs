@@ -1,6 +1,7 @@
 //! What several commands share, so each command module depends only on the libraries and
 //! this one: the device, rig and controller flags, Zenoh and interrupt plumbing, the recording
-//! session's tally and timer, scoring, and the rerun viewer glue.
+//! session's tally and timer, scoring, input locations (paths or `s3://` URLs), and the rerun
+//! viewer glue.
 
 mod control;
 mod scoring;
@@ -13,6 +14,11 @@ use crate::cli::{CompressionArg, NetArgs};
 pub use control::{rig_for, ControlArgs};
 pub use scoring::{wilson_interval, Successes};
 pub use session::{drain, timed_episodes, wait_for_topics, Tally};
+
+/// A command-line path or `s3://` URL (convert, merge and recover take either).
+pub fn location(arg: &std::path::Path) -> Result<scaledp_converter::Location> {
+    Ok(scaledp_converter::Location::parse(arg.as_os_str())?)
+}
 
 /// The device named on the command line.
 pub fn device(name: &str) -> Result<candle_core::Device> {
