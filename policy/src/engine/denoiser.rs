@@ -124,7 +124,7 @@ pub(crate) fn forward(
     timestep_embedding(t, sized(&mut w.tf, m * FREQ_DIM));
     linear(
         &w.tf,
-        wv.get("t_embedder.mlp.0.weight")?,
+        wv.linear("t_embedder.mlp.0.weight")?,
         Some(wv.get("t_embedder.mlp.0.bias")?),
         m,
         FREQ_DIM,
@@ -134,7 +134,7 @@ pub(crate) fn forward(
     ops::map(&w.t1, sized(&mut w.ts, m * d), ops::silu);
     linear(
         &w.ts,
-        wv.get("t_embedder.mlp.2.weight")?,
+        wv.linear("t_embedder.mlp.2.weight")?,
         Some(wv.get("t_embedder.mlp.2.bias")?),
         m,
         d,
@@ -143,7 +143,7 @@ pub(crate) fn forward(
     );
     linear(
         cond,
-        wv.get("cond_obs_emb.weight")?,
+        wv.linear("cond_obs_emb.weight")?,
         Some(wv.get("cond_obs_emb.bias")?),
         n,
         s.cond,
@@ -161,7 +161,7 @@ pub(crate) fn forward(
     let h = sized(&mut w.h, rows * d);
     linear(
         &w.x,
-        wv.get("x_embedder.weight")?,
+        wv.linear("x_embedder.weight")?,
         Some(wv.get("x_embedder.bias")?),
         rows,
         a,
@@ -179,7 +179,7 @@ pub(crate) fn forward(
     for (i, b) in w.blocks.iter_mut().enumerate() {
         linear(
             &w.cs,
-            wv.get(&blk(i, "adaLN_modulation.1.weight"))?,
+            wv.linear(&blk(i, "adaLN_modulation.1.weight"))?,
             Some(wv.get(&blk(i, "adaLN_modulation.1.bias"))?),
             m,
             d,
@@ -204,7 +204,7 @@ pub(crate) fn forward(
         );
         linear(
             &b.u1,
-            wv.get(&blk(i, "attn.qkv.weight"))?,
+            wv.linear(&blk(i, "attn.qkv.weight"))?,
             Some(wv.get(&blk(i, "attn.qkv.bias"))?),
             rows,
             d,
@@ -219,7 +219,7 @@ pub(crate) fn forward(
         );
         linear(
             &b.o,
-            wv.get(&blk(i, "attn.proj.weight"))?,
+            wv.linear(&blk(i, "attn.proj.weight"))?,
             Some(wv.get(&blk(i, "attn.proj.bias"))?),
             rows,
             d,
@@ -246,7 +246,7 @@ pub(crate) fn forward(
         let hid = s.mlp * d;
         linear(
             &b.u2,
-            wv.get(&blk(i, "mlp.fc1.weight"))?,
+            wv.linear(&blk(i, "mlp.fc1.weight"))?,
             Some(wv.get(&blk(i, "mlp.fc1.bias"))?),
             rows,
             d,
@@ -256,7 +256,7 @@ pub(crate) fn forward(
         ops::map(&b.f1, sized(&mut b.g, rows * hid), ops::gelu);
         linear(
             &b.g,
-            wv.get(&blk(i, "mlp.fc2.weight"))?,
+            wv.linear(&blk(i, "mlp.fc2.weight"))?,
             Some(wv.get(&blk(i, "mlp.fc2.bias"))?),
             rows,
             hid,
@@ -267,7 +267,7 @@ pub(crate) fn forward(
     }
     linear(
         &w.cs,
-        wv.get("final_layer.adaLN_modulation.1.weight")?,
+        wv.linear("final_layer.adaLN_modulation.1.weight")?,
         Some(wv.get("final_layer.adaLN_modulation.1.bias")?),
         m,
         d,
@@ -292,7 +292,7 @@ pub(crate) fn forward(
     );
     linear(
         &w.uf,
-        wv.get("final_layer.linear.weight")?,
+        wv.linear("final_layer.linear.weight")?,
         Some(wv.get("final_layer.linear.bias")?),
         rows,
         d,

@@ -19,7 +19,7 @@ struct ConvAt {
     name: String,
     geom: Geom,
     /// `[C_out, kh, kw, C_in]`.
-    wp: Vec<f32>,
+    wp: std::sync::Arc<[f32]>,
 }
 
 impl ConvAt {
@@ -27,7 +27,7 @@ impl ConvAt {
         let shape = wv.shape(&name)?;
         let padding = shape[2] / 2;
         let geom = Geom::new(&input, &shape, stride, padding)?;
-        let wp = conv::oihw_to_ohwi(&geom, wv.get(&name)?);
+        let wp = wv.conv_ohwi(&name, &geom)?;
         Ok(ConvAt { name, geom, wp })
     }
     fn out_dims(&self) -> [usize; 4] {

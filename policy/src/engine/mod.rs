@@ -17,6 +17,7 @@ pub(crate) mod ops;
 mod step;
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use candle_core::{CpuStorage, Layout, Storage, StorageRef, Tensor};
 
@@ -24,9 +25,60 @@ use crate::error::{Error, Result};
 
 pub(crate) use step::{Engine, Sampler};
 
-/// The model's weights, read in place (a read lock on each tensor while the view lives).
+/// The model's weights, read in place (a read lock on each tensor while the view lives), and
+/// for inference `[in, out]` copies of the Linear weights ([`InOut`]).
 pub(crate) struct WeightView<'a> {
     entries: HashMap<&'a str, (StorageRef<'a>, &'a Layout)>,
+    in_out: Option<&'a InOut>,
+}
+
+/// `[in, out]` copies of a model's 2-D weights (Linear layers), made once for a model whose
+/// weights no longer change (a loaded policy): see [`ops::LinearWeight`]. Remembers which
+/// tensors it copied, so a different model is noticed.
+/// The convolutions' kernels are kept reordered `[C_out, kh, kw, C_in]` the same way.
+#[derive(Default)]
+pub(crate) struct InOut {
+    of: Vec<candle_core::TensorId>,
+    map: HashMap<String, Vec<f32>>,
+    ohwi: HashMap<String, Arc<[f32]>>,
+}
+
+impl InOut {
+    /// Whether these are the copies of `weights`.
+    pub fn is_of(&self, weights: &[(String, Tensor)]) -> bool {
+        self.of.len() == weights.len()
+            && self.of.iter().zip(weights).all(|(a, (_, t))| *a == t.id())
+    }
+
+    /// `[in, out]` copies of every 2-D weight named `*.weight` among `weights`.
+    pub fn of(weights: &[(String, Tensor)]) -> Result<Self> {
+        let view = WeightView::new(weights);
+        let (mut map, mut ohwi) = (HashMap::new(), HashMap::new());
+        for (name, t) in weights {
+            if !name.ends_with(".weight") {
+                continue;
+            }
+            if let &[_, ci, kh, kw] = t.dims() {
+                let k = crate::model::conv::kernel_to_ohwi(ci, kh * kw, view.get(name)?);
+                ohwi.insert(name.clone(), Arc::from(k));
+                continue;
+            }
+            let &[out, inp] = t.dims() else { continue };
+            let w = view.get(name)?;
+            let mut c = vec![0f32; out * inp];
+            for (o, row) in w.chunks_exact(inp).enumerate() {
+                for (i, v) in row.iter().enumerate() {
+                    c[i * out + o] = *v;
+                }
+            }
+            map.insert(name.clone(), c);
+        }
+        Ok(InOut {
+            of: weights.iter().map(|(_, t)| t.id()).collect(),
+            map,
+            ohwi,
+        })
+    }
 }
 
 impl<'a> WeightView<'a> {
@@ -37,6 +89,32 @@ impl<'a> WeightView<'a> {
                 .iter()
                 .map(|(n, t)| (n.as_str(), t.storage_and_layout()))
                 .collect(),
+            in_out: None,
+        }
+    }
+
+    /// The view, multiplying Linear layers by the `[in, out]` copies in `c`.
+    pub fn with_in_out(mut self, c: &'a InOut) -> Self {
+        self.in_out = Some(c);
+        self
+    }
+
+    /// Convolution kernel `name` (of geometry `g`) reordered `[C_out, kh, kw, C_in]`.
+    pub fn conv_ohwi(&self, name: &str, g: &crate::model::conv::Geom) -> Result<Arc<[f32]>> {
+        match self.in_out.and_then(|c| c.ohwi.get(name)) {
+            Some(k) => Ok(k.clone()),
+            None => Ok(crate::model::conv::oihw_to_ohwi(g, self.get(name)?).into()),
+        }
+    }
+
+    /// Linear weight `name` for a forward pass: its `[in, out]` copy when the view has one.
+    pub fn linear(&self, name: &str) -> Result<ops::LinearWeight<'_>> {
+        match self.in_out.and_then(|c| c.map.get(name)) {
+            Some(v) => Ok(ops::LinearWeight {
+                values: v,
+                in_out: true,
+            }),
+            None => self.get(name).map(ops::LinearWeight::from),
         }
     }
 

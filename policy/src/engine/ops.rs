@@ -12,18 +12,49 @@ pub(crate) fn rows_per_task(rows: usize, width: usize) -> usize {
     target.clamp(1, rows.div_ceil(8).max(1))
 }
 
+/// A Linear layer's weight as a forward pass multiplies with it: PyTorch's `[out, in]` layout
+/// (the model's own tensor), or a copy laid out `[in, out]`. With a few rows (DDIM at batch 1:
+/// 16 action tokens) the GEMM repacks an `[out, in]` weight on every call, which costs about
+/// as much as the product; an `[in, out]` copy is multiplied in place.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LinearWeight<'a> {
+    pub values: &'a [f32],
+    /// `values` is `[in, out]` (else `[out, in]`).
+    pub in_out: bool,
+}
+
+impl<'a> From<&'a [f32]> for LinearWeight<'a> {
+    fn from(values: &'a [f32]) -> Self {
+        LinearWeight {
+            values,
+            in_out: false,
+        }
+    }
+}
+
 /// `y[r] = x[r] · wᵀ + b` for `rows` rows: `x` `[rows, k]`, `w` `[n, k]` (PyTorch's Linear
-/// layout), `y` `[rows, n]`.
-pub(crate) fn linear(
+/// layout) or its `[k, n]` copy, `y` `[rows, n]`.
+pub(crate) fn linear<'a>(
     x: &[f32],
-    w: &[f32],
+    w: impl Into<LinearWeight<'a>>,
     b: Option<&[f32]>,
     rows: usize,
     k: usize,
     n: usize,
     y: &mut [f32],
 ) {
-    gemm(rows, n, k, x, false, w, true, &mut y[..rows * n], false);
+    let w = w.into();
+    gemm(
+        rows,
+        n,
+        k,
+        x,
+        false,
+        w.values,
+        !w.in_out,
+        &mut y[..rows * n],
+        false,
+    );
     if let Some(b) = b {
         let per = rows_per_task(rows, n);
         y[..rows * n].par_chunks_mut(per * n).for_each(|ys| {
@@ -162,17 +193,48 @@ pub(crate) fn silu_grad(x: f32) -> f32 {
 const SQRT_2_OVER_PI: f32 = 0.797_884_6;
 const GELU_C: f32 = 0.044_715;
 
+/// tanh as a rational function of degree 13/6 on [−7.9988, 7.9988] (±1 beyond, the identity
+/// below 4·10⁻⁴): Eigen's `generic_fast_tanh_float`, within 5·10⁻⁷ of tanh (see the test).
+/// Branch-free, so a loop of it vectorizes; libm's `tanhf`, one value at a time, took an eighth
+/// of a DDIM sample and of a training step's denoiser (the MLP's GELU on every hidden unit).
+#[inline]
+pub(crate) fn tanh(x: f32) -> f32 {
+    const A: [f32; 7] = [
+        4.893_524_6e-3,
+        6.372_619_3e-4,
+        1.485_722_4e-5,
+        5.122_297e-8,
+        -8.604_672e-11,
+        2.000_188e-13,
+        -2.760_768_5e-16,
+    ];
+    const B: [f32; 4] = [4.893_525e-3, 2.268_434_6e-3, 1.185_347e-4, 1.198_258_4e-6];
+    let c = x.clamp(-7.998_811_7, 7.998_811_7);
+    let x2 = c * c;
+    // Plain products and sums: `mul_add` without the FMA target feature is a libm call.
+    let mut p = x2 * A[6] + A[5];
+    for a in A[..5].iter().rev() {
+        p = x2 * p + a;
+    }
+    let q = ((x2 * B[3] + B[2]) * x2 + B[1]) * x2 + B[0];
+    if x.abs() < 4e-4 {
+        x
+    } else {
+        c * p / q
+    }
+}
+
 /// tanh-GELU (PyTorch's `approximate="tanh"`, candle's `gelu`).
 #[inline]
 pub(crate) fn gelu(x: f32) -> f32 {
-    0.5 * x * (1.0 + (SQRT_2_OVER_PI * (x + GELU_C * x * x * x)).tanh())
+    0.5 * x * (1.0 + tanh(SQRT_2_OVER_PI * (x + GELU_C * x * x * x)))
 }
 
 /// d tanh-GELU / dx.
 #[inline]
 pub(crate) fn gelu_grad(x: f32) -> f32 {
     let u = SQRT_2_OVER_PI * (x + GELU_C * x * x * x);
-    let t = u.tanh();
+    let t = tanh(u);
     let du = SQRT_2_OVER_PI * (1.0 + 3.0 * GELU_C * x * x);
     0.5 * (1.0 + t) + 0.5 * x * (1.0 - t * t) * du
 }

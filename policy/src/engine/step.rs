@@ -8,7 +8,7 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use scaledp_datasets::Batch;
 
-use super::{denoiser, encoder, Grads, WeightView};
+use super::{denoiser, encoder, Grads, InOut, WeightView};
 use crate::config::{Attention, ModelConfig};
 use crate::error::{Error, Result};
 use crate::model::encoder::crop_values;
@@ -24,6 +24,8 @@ pub(crate) struct Engine {
     denoiser: denoiser::Work,
     /// The last condition `[b, cond_dim]` (its rows' camera features then state, per frame).
     cond: Vec<f32>,
+    /// `[in, out]` copies of the Linear weights of the model [`Engine::sample`] last sampled.
+    in_out: InOut,
 }
 
 impl std::fmt::Debug for Engine {
@@ -222,7 +224,9 @@ impl Engine {
 
     /// Normalized action chunks `[b, C, A]` by DDIM for `b` observations laid out as a batch,
     /// centre-cropped: the noise drawn from `rng` after the (draw-free) encoding, as
-    /// [`crate::ddim_sample`] does.
+    /// [`crate::ddim_sample`] does. The denoiser multiplies by `[in, out]` copies of its Linear
+    /// weights, made on the first call for a model and reused while the model's tensors are the
+    /// same: an engine samples a model whose weights do not change in place (a loaded policy).
     pub fn sample(
         &mut self,
         model: &ScaleDp,
@@ -235,21 +239,36 @@ impl Engine {
         let c = model.config().clone();
         let sh = shape(&c);
         let weights = model.weights();
-        let wv = WeightView::new(weights);
-        self.encode(model, &wv, images, state, b, Crop::Center, rng)?;
+        if !self.in_out.is_of(weights) {
+            self.in_out = InOut::of(weights)?;
+        }
+        let in_out = std::mem::take(&mut self.in_out);
+        let wv = WeightView::new(weights).with_in_out(&in_out);
+        let x = self.sample_with(&c, &sh, &wv, model, scheduler, images, state, b, rng);
+        drop(wv);
+        self.in_out = in_out;
+        x
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn sample_with(
+        &mut self,
+        c: &ModelConfig,
+        sh: &denoiser::Shape,
+        wv: &WeightView,
+        model: &ScaleDp,
+        scheduler: &NoiseScheduler,
+        images: &[u8],
+        state: &[f32],
+        b: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<f32>> {
+        self.encode(model, wv, images, state, b, Crop::Center, rng)?;
         let n = c.action_chunk * c.action_dim;
         let mut x = randn(rng, b * n);
         let cond = std::mem::take(&mut self.cond);
         for &t in scheduler.timesteps() {
-            denoiser::forward(
-                &sh,
-                &wv,
-                &x,
-                &vec![t as f32; b],
-                &cond,
-                1,
-                &mut self.denoiser,
-            )?;
+            denoiser::forward(sh, wv, &x, &vec![t as f32; b], &cond, 1, &mut self.denoiser)?;
             scheduler.step_values(&self.denoiser.out, t, &mut x)?;
         }
         self.cond = cond;

@@ -115,7 +115,11 @@ impl Geom {
 
 /// `[C_out, C_in, kh, kw]` → `[C_out, kh, kw, C_in]`.
 pub(crate) fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
-    let (ci, kk) = (g.c_in, g.kh * g.kw);
+    kernel_to_ohwi(g.c_in, g.kh * g.kw, w)
+}
+
+/// [`oihw_to_ohwi`] of a kernel with `ci` input channels and `kk` taps.
+pub(crate) fn kernel_to_ohwi(ci: usize, kk: usize, w: &[f32]) -> Vec<f32> {
     let mut out = vec![0f32; w.len()];
     for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
         let src = &w[o * ci * kk..(o + 1) * ci * kk];
