@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Builds `scaledp` with candle's CUDA backend (`--features scaledp-policy/cuda`) on a machine with
 # neither a GPU nor a CUDA install: nvcc, the CUDA headers and the libraries to link against come
-# from NVIDIA's wheels on PyPI (CUDA 12.8, the set torch 2.10 uses) in target/cuda-sdk; the
+# from NVIDIA's wheels on PyPI in target/cuda-sdk (CUDA 13.0: the CUDA 12 nvcc wheels hold ptxas
+# but no nvcc driver; CUDA 13 needs an NVIDIA driver >= 580 on the GPU machine); the
 # driver library, which only a GPU machine has, is replaced at link time by a stub exporting the
 # driver API cudarc calls (the real libcuda.so.1 is loaded on the GPU machine at run time). The
 # kernels are compiled for CUDA_COMPUTE_CAP (default 80: A100; 90 for H100), into their own
@@ -17,17 +18,18 @@ export CUDA_COMPUTE_CAP=${CUDA_COMPUTE_CAP:-80}
 export CARGO_TARGET_DIR=${CARGO_TARGET_DIR:-target/cuda}
 SDK=$PWD/target/cuda-sdk
 PY=${PYTHON:-python3}
-CUDA_WHEELS=(nvidia-cuda-nvcc-cu12==12.8.93 nvidia-cuda-runtime-cu12==12.8.90
-  nvidia-cuda-nvrtc-cu12==12.8.93 nvidia-cublas-cu12==12.8.4.1 nvidia-curand-cu12==10.3.9.90)
+CUDA_WHEELS=(nvidia-cuda-nvcc==13.0.88 nvidia-cuda-crt==13.0.88 nvidia-nvvm==13.0.88
+  nvidia-cuda-runtime==13.0.96 nvidia-cuda-nvrtc==13.0.88 nvidia-cublas==13.0.2.14
+  nvidia-curand==10.4.0.35 nvidia-cuda-cccl==13.0.85)
 
 [ -x "$SDK/venv/bin/python" ] || "$PY" -m venv "$SDK/venv"
 "$SDK/venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps "${CUDA_WHEELS[@]}"
-NV=$("$SDK/venv/bin/python" -c 'import nvidia; print(nvidia.__path__[0])')
+CU=$("$SDK/venv/bin/python" -c 'import nvidia; print(nvidia.__path__[0])')/cu13
 
 # A CUDA_HOME-shaped tree: nvcc, every wheel's headers, unversioned names of the libraries.
 rm -rf "${SDK:?}/include" "${SDK:?}/lib" && mkdir -p "$SDK/include" "$SDK/lib"
-for d in "$NV"/*/include; do cp -rs "$d"/. "$SDK/include/" 2>/dev/null || true; done
-for so in "$NV"/*/lib/lib*.so.*; do
+cp -rs "$CU/include"/. "$SDK/include/"
+for so in "$CU"/lib/lib*.so.*; do
   base=$(basename "$so")
   ln -sf "$so" "$SDK/lib/$base"
   ln -sf "$so" "$SDK/lib/${base%%.so.*}.so"
@@ -43,8 +45,9 @@ cc -shared -fPIC -Wl,-soname,libcuda.so.1 -o "$SDK/lib/libcuda.so" "$SDK/cuda_st
 echo "driver stub: $(wc -l < "$SDK/cuda_stub.c") symbols of cudarc $CUDARC"
 
 export CUDA_HOME=$SDK CUDA_PATH=$SDK
-export PATH="$NV/cuda_nvcc/bin:$PATH"
-export NVCC_APPEND_FLAGS="-I$SDK/include"
+export PATH="$CU/bin:$PATH"
+# CUDA 13 keeps libcu++ (<nv/target>, which cuda_fp16.h includes) under include/cccl.
+export NVCC_APPEND_FLAGS="-I$SDK/include -isystem $SDK/include/cccl"
 export LIBRARY_PATH="$SDK/lib${LIBRARY_PATH:+:$LIBRARY_PATH}"
 nvcc --version | tail -n 2
 start=$(date +%s)
