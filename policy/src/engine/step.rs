@@ -25,7 +25,7 @@ pub(crate) struct Engine {
     /// The last condition `[b, cond_dim]` (its rows' camera features then state, per frame).
     cond: Vec<f32>,
     /// `[in, out]` copies of the Linear weights of the model [`Engine::sample`] last sampled.
-    in_out: InOut,
+    in_out: std::sync::Arc<InOut>,
 }
 
 impl std::fmt::Debug for Engine {
@@ -240,35 +240,25 @@ impl Engine {
         let sh = shape(&c);
         let weights = model.weights();
         if !self.in_out.is_of(weights) {
-            self.in_out = InOut::of(weights)?;
+            self.in_out = std::sync::Arc::new(InOut::of(weights)?);
         }
-        let in_out = std::mem::take(&mut self.in_out);
+        // A handle of its own, so the view does not borrow the engine the passes write into.
+        let in_out = self.in_out.clone();
         let wv = WeightView::new(weights).with_in_out(&in_out);
-        let x = self.sample_with(&c, &sh, &wv, model, scheduler, images, state, b, rng);
-        drop(wv);
-        self.in_out = in_out;
-        x
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn sample_with(
-        &mut self,
-        c: &ModelConfig,
-        sh: &denoiser::Shape,
-        wv: &WeightView,
-        model: &ScaleDp,
-        scheduler: &NoiseScheduler,
-        images: &[u8],
-        state: &[f32],
-        b: usize,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<Vec<f32>> {
-        self.encode(model, wv, images, state, b, Crop::Center, rng)?;
+        self.encode(model, &wv, images, state, b, Crop::Center, rng)?;
         let n = c.action_chunk * c.action_dim;
         let mut x = randn(rng, b * n);
         let cond = std::mem::take(&mut self.cond);
         for &t in scheduler.timesteps() {
-            denoiser::forward(sh, wv, &x, &vec![t as f32; b], &cond, 1, &mut self.denoiser)?;
+            denoiser::forward(
+                &sh,
+                &wv,
+                &x,
+                &vec![t as f32; b],
+                &cond,
+                1,
+                &mut self.denoiser,
+            )?;
             scheduler.step_values(&self.denoiser.out, t, &mut x)?;
         }
         self.cond = cond;
