@@ -360,6 +360,16 @@ class Trainer:
         self.d.barrier()
         return path
 
+    def close(self) -> None:
+        """Closes ``metrics.jsonl`` and drops the DDP wrapper, the optimizer and the loaders, so
+        the process group's last users are gone before it is destroyed."""
+        if self.metrics is not None:
+            self.metrics.close()
+            self.metrics = None
+        self._it = None
+        self.net = self.loss = self.optim = None
+        self.train_ds = self.val = None
+
     def log(self, v: Dict[str, Any]) -> None:
         """Appends a line to ``metrics.jsonl`` (rank 0)."""
         if self.metrics is not None:
