@@ -32,6 +32,13 @@ pub enum Frame {
 
 /// Decodes an image message (raw or compressed) from `path`.
 pub fn frame(path: &Path, m: &RawMessage) -> Result<Frame> {
+    if crate::video::is_video(&m.message_type) {
+        // MCAP inputs decode video topics as they are read; bags are read whole into memory,
+        // where decoded video would not fit.
+        let reason = "a CompressedVideo camera in a ROS bag: video topics are read from MCAP \
+                      recordings (rosbag2's default storage) only";
+        return wrap(path, m, Err(reason.to_string()));
+    }
     let compressed = m.message_type.ends_with("/CompressedImage");
     let r = match (m.serialization, compressed) {
         (Serialization::Cdr, false) => Image::from_cdr(&m.data)

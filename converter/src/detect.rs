@@ -124,7 +124,18 @@ fn match_arm(names: &[String]) -> Option<(RobotModel, Vec<String>, String)> {
         .then_some((RobotModel::Ur5, joints, prefix))
 }
 
-/// Detects cameras (Image / CompressedImage topics) and arms and grippers (JointState topics
+/// The codec of a video topic as its recording's rig names it (none without one: the frames
+/// are decoded by then, and the name only describes the rig).
+fn video_format(path: &Path, rec: &Recording, topic: &str) -> Option<String> {
+    from_metadata(path, rec).ok().flatten().and_then(|r| {
+        r.cameras
+            .iter()
+            .find(|c| c.topic == topic)
+            .and_then(|c| c.video_codec().map(str::to_string))
+    })
+}
+
+/// Detects cameras (Image / CompressedImage / CompressedVideo topics) and arms and grippers (JointState topics
 /// whose names match FR3, Panda, UR or a Franka Hand / Robotiq gripper). UR arms are taken as
 /// UR5; pass `--rig` for a UR5e.
 pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig> {
@@ -136,7 +147,10 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
             continue;
         };
         match t.message_type.as_str() {
-            "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage" => {
+            "sensor_msgs/msg/Image"
+            | "sensor_msgs/msg/CompressedImage"
+            | "foxglove_msgs/msg/CompressedVideo" => {
+                // A video topic's first message was read as its first picture (crate::video).
                 let frame = crate::decode::frame(path, first)?;
                 let (w, h, enc) = match &frame {
                     crate::decode::Frame::Raw(i) => (i.width, i.height, Some(i.encoding.clone())),
@@ -153,7 +167,10 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                     width: w.max(1),
                     height: h.max(1),
                     fps: rate_hz(rec, &t.topic),
-                    encoding: enc,
+                    encoding: match crate::video::is_video(&t.message_type) {
+                        true => video_format(path, rec, &t.topic),
+                        false => enc,
+                    },
                     compressed: t.message_type.ends_with("CompressedImage"),
                 });
             }

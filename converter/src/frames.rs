@@ -19,6 +19,7 @@ use crate::mcap_stream::{stream, stream_hashed, Payload};
 use crate::options::ConvertOptions;
 use crate::prefetch::Selector;
 use crate::source::{RawMessage, Recording, Serialization, TopicInfo};
+use crate::video::{is_video, Transcoder, IMAGE};
 
 pub use crate::encode_pool::FrameKey;
 
@@ -59,6 +60,43 @@ pub(crate) fn is_image(message_type: &str) -> bool {
         message_type,
         "sensor_msgs/msg/Image" | "sensor_msgs/msg/CompressedImage"
     )
+}
+
+/// A message after [`transcode`].
+enum Transcoded {
+    /// Not a video frame: read as it is.
+    Pass,
+    /// A video frame that gives no picture: not one of its topic's frames.
+    Dropped,
+    /// A video frame's picture: the topic as a raw image topic, and the image message (CDR).
+    Picture(TopicInfo, Arc<Vec<u8>>),
+}
+
+/// Decodes a video topic's frame to a raw image message (see [`crate::video`]).
+fn transcode(
+    path: &Path,
+    video: &mut Transcoder,
+    topic: &TopicInfo,
+    log_time_ns: u64,
+    payload: &Payload<'_>,
+) -> Result<Transcoded> {
+    if !is_video(&topic.message_type) {
+        return Ok(Transcoded::Pass);
+    }
+    let decoded = payload
+        .share()
+        .with(|data| video.frame(path, &topic.topic, log_time_ns, data))
+        .map_err(|e| Error::input(path, format!("corrupt MCAP chunk: {e}")))??;
+    Ok(match decoded {
+        Some(cdr) => Transcoded::Picture(
+            TopicInfo {
+                message_type: IMAGE.into(),
+                ..topic.clone()
+            },
+            Arc::new(cdr),
+        ),
+        None => Transcoded::Dropped,
+    })
 }
 
 /// Frames of a recording already in memory.
@@ -124,6 +162,8 @@ pub struct McapFrames {
     /// Per topic, the message types counted as its frames on the first read (wanted images):
     /// a second read counts the same messages, so ordinals agree.
     frame_types: BTreeMap<String, BTreeSet<String>>,
+    /// Camera topics recorded as video (decoded from their start on every read).
+    video_topics: BTreeSet<String>,
     /// Frames encoded during the first read, per `spec`.
     ready: Mutex<Encodings>,
     spec: Option<EncodeSpec>,
@@ -196,14 +236,26 @@ impl FrameStore for McapFrames {
         self.read_again
             .fetch_add(left, std::sync::atomic::Ordering::Relaxed);
         let mut ordinal: BTreeMap<String, usize> = BTreeMap::new();
+        let video_missing = missing.keys().any(|t| self.video_topics.contains(t));
         let (read, done) = encode_while(path, spec, |submit| {
-            let path = match &self.source {
-                McapSource::File(path) => path,
-                McapSource::Object(remote) => {
-                    return self.read_remote_again(remote, &missing, left, submit);
+            if let (McapSource::Object(remote), false) = (&self.source, video_missing) {
+                return self.read_remote_again(remote, &missing, left, submit);
+            }
+            let mut video = Transcoder::default();
+            let mut again = |topic: &TopicInfo, log_time_ns, payload: Payload<'_>, _: &_| {
+                if !missing.contains_key(&topic.topic) {
+                    return Ok(true);
                 }
-            };
-            stream(path, &mut |topic, log_time_ns, payload, _| {
+                let picture;
+                let (topic, payload) =
+                    match transcode(path, &mut video, topic, log_time_ns, &payload)? {
+                        Transcoded::Pass => (topic, payload),
+                        Transcoded::Dropped => return Ok(true),
+                        Transcoded::Picture(t, bytes) => {
+                            picture = (t, bytes);
+                            (&picture.0, Payload::Ready(&picture.1, 0..picture.1.len()))
+                        }
+                    };
                 let Some(set) = missing.get(&topic.topic).filter(|_| self.is_frame(topic)) else {
                     return Ok(true);
                 };
@@ -219,8 +271,12 @@ impl FrameStore for McapFrames {
                 }
                 *o += 1;
                 Ok(left > 0)
-            })
-            .map(drop)
+            };
+            match &self.source {
+                McapSource::File(path) => stream(path, &mut again).map(drop),
+                // Video frames decode from their topic's start: the whole object again.
+                McapSource::Object(remote) => remote.stream(None, &mut again).map(drop),
+            }
         });
         read?;
         for (key, r) in done {
@@ -319,11 +375,23 @@ pub(crate) fn read_mcap_from(
     let mut messages = Vec::new();
     let mut stamps: BTreeMap<String, Vec<(u64, u64)>> = BTreeMap::new();
     let mut frame_types: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    let mut video_topics = BTreeSet::new();
     let read = |submit: &mut dyn FnMut(FrameJob)| {
+        let mut video = Transcoder::default();
         let mut on_message = |t: &TopicInfo, log_time_ns, payload: Payload<'_>, metadata: &_| {
             if !want(t) {
                 return Ok(true);
             }
+            let picture;
+            let (t, payload) = match transcode(path, &mut video, t, log_time_ns, &payload)? {
+                Transcoded::Pass => (t, payload),
+                Transcoded::Dropped => return Ok(true),
+                Transcoded::Picture(topic, bytes) => {
+                    video_topics.insert(t.topic.clone());
+                    picture = (topic, bytes);
+                    (&picture.0, Payload::Ready(&picture.1, 0..picture.1.len()))
+                }
+            };
             let header =
                 scaledp_schema::msg::header_stamp(payload.prefix()).map_or(0, |s| s.as_ns());
             let data = || -> Result<Vec<u8>> {
@@ -378,6 +446,7 @@ pub(crate) fn read_mcap_from(
         if let (Ok(_), Some(s)) = (&r, &mut selector) {
             s.finish(submit);
         }
+        video.warn_dropped(path);
         r
     };
     let (read, ready) = match &spec {
@@ -397,6 +466,7 @@ pub(crate) fn read_mcap_from(
             source,
             stamps,
             frame_types,
+            video_topics,
             ready: Mutex::new(ready),
             spec,
             read_again: Default::default(),

@@ -64,6 +64,7 @@ mod series;
 mod source;
 mod stats;
 mod urdf;
+mod video;
 
 pub use align::{align, Alignment, AlignmentReport, Stream, StreamReport};
 pub use batch::{run, run_inputs, InputResult, Progress};

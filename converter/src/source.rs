@@ -57,6 +57,7 @@ pub(crate) fn is_read(message_type: &str) -> bool {
         message_type,
         "sensor_msgs/msg/Image"
             | "sensor_msgs/msg/CompressedImage"
+            | "foxglove_msgs/msg/CompressedVideo"
             | "sensor_msgs/msg/JointState"
             | "geometry_msgs/msg/PoseStamped"
     )

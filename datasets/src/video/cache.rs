@@ -6,9 +6,9 @@
 
 use std::sync::Mutex;
 
-use super::codec::{new_decoder, Decode};
 use super::mp4::Track;
-use super::yuv::Yuv420;
+use scaledp_codec::Yuv420;
+use scaledp_codec::{new_decoder, Decode};
 
 /// Compressed samples of one track, consecutive in decode order, as read from the file.
 pub(crate) struct Span<'a> {

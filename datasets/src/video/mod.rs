@@ -4,14 +4,12 @@
 //! than the tolerance (LeRobot's rule: `tolerance_s`, 1e-4 s by default). Reading a window
 //! reads from the keyframe before its first frame to its last frame, nothing else; decoding
 //! goes through the bounded [`cache::DecoderCache`]; pictures are converted to RGB as ffmpeg
-//! converts them for LeRobot ([`yuv`]), resized bilinearly when another size is asked for.
+//! converts them for LeRobot (`scaledp_codec::Yuv420`), resized bilinearly when another size is asked for.
 //! A file's index is read once, on first use; a file that cannot be used fails the samples that
 //! need it, each with one line naming the file and the problem.
 
 mod cache;
-mod codec;
 mod mp4;
-mod yuv;
 
 use std::cell::RefCell;
 use std::collections::HashMap;

@@ -6,7 +6,7 @@
 
 use std::io::{Read, Seek};
 
-use super::codec::Codec;
+use scaledp_codec::Codec;
 
 /// One sample (an access unit) of the track.
 #[derive(Clone, Copy, Debug)]

@@ -9,13 +9,20 @@
 
 /// 8-bit planes of one picture in 4:2:0 (chroma planes half the size, rounded up).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct Yuv420<'a> {
+pub struct Yuv420<'a> {
+    /// Columns.
     pub width: usize,
+    /// Rows.
     pub height: usize,
+    /// Luma, `y_stride` bytes per row.
     pub y: &'a [u8],
+    /// Cb, `uv_stride` bytes per row of half the rows (rounded up).
     pub u: &'a [u8],
+    /// Cr, as `u`.
     pub v: &'a [u8],
+    /// Bytes per luma row (at least `width`).
     pub y_stride: usize,
+    /// Bytes per chroma row (at least half of `width`, rounded up).
     pub uv_stride: usize,
 }
 

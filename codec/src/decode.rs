@@ -5,17 +5,19 @@
 
 use re_rav1d::dav1d;
 
-use super::yuv::Yuv420;
+use crate::yuv::Yuv420;
 
-/// The codecs of video features we decode.
+/// The codecs we decode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Codec {
+pub enum Codec {
+    /// AV1 (`av01`; temporal units of OBUs).
     Av1,
+    /// H.264 (`avc1` with an `avcC` record, or Annex B with in-band parameter sets).
     H264,
 }
 
 /// A decoder fed one MP4 sample (an access unit / temporal unit) at a time.
-pub(crate) trait Decode: Send {
+pub trait Decode: Send {
     /// Decodes one sample; every picture that comes out is handed to `out`.
     fn push(&mut self, sample: &[u8], out: &mut dyn FnMut(Yuv420<'_>)) -> Result<(), String>;
     /// Hands out the pictures still held back for reordering.
@@ -26,8 +28,9 @@ pub(crate) trait Decode: Send {
 }
 
 /// A fresh decoder for `codec`; `config` is the sample entry's configuration record (`avcC`
-/// for H.264: its length size and parameter sets).
-pub(crate) fn new_decoder(codec: Codec, config: &[u8]) -> Result<Box<dyn Decode>, String> {
+/// for H.264: its length size and parameter sets), empty for Annex B samples that carry their
+/// parameter sets in band (`foxglove_msgs/CompressedVideo`).
+pub fn new_decoder(codec: Codec, config: &[u8]) -> Result<Box<dyn Decode>, String> {
     Ok(match codec {
         Codec::Av1 => Box::new(Av1::new()?),
         Codec::H264 => Box::new(H264::new(config)?),
@@ -140,7 +143,7 @@ impl H264 {
 }
 
 /// `AVCDecoderConfigurationRecord` → (NAL length size, SPS and PPS as Annex B).
-pub(crate) fn parse_avcc(c: &[u8]) -> Result<(usize, Vec<u8>), String> {
+pub fn parse_avcc(c: &[u8]) -> Result<(usize, Vec<u8>), String> {
     let bad = || "H.264 configuration (avcC) cut short".to_string();
     if c.len() < 6 || c[0] != 1 {
         return Err("H.264 configuration (avcC) is not version 1".into());
