@@ -147,7 +147,13 @@ fn camera_streams(
         if stamps.is_empty() {
             return Err(Error::Rejected {
                 path: path.into(),
-                reason: format!("camera '{}' ({}) has no messages", c.name, c.topic),
+                reason: match c.video_codec() {
+                    Some(codec) => format!(
+                        "camera '{}' ({}) has no {codec} frame that decodes",
+                        c.name, c.topic
+                    ),
+                    None => format!("camera '{}' ({}) has no messages", c.name, c.topic),
+                },
             });
         }
         let ordered = Ordered::new(path, &c.topic, &stamps, opts.reorder_window_ns())?;

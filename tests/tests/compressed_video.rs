@@ -193,3 +193,100 @@ fn an_h264_recording_converts_to_the_dataset_of_its_raw_twin() {
         );
     }
 }
+
+/// `src` rewritten with `corrupt(topic, ordinal, frame)` applied to every CompressedVideo
+/// message (metadata records kept).
+fn rewrite(
+    src: &std::path::Path,
+    dst: &std::path::Path,
+    corrupt: &dyn Fn(&str, usize, &mut Vec<u8>),
+) {
+    let bytes = std::fs::read(src).unwrap();
+    let mut w = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(std::io::BufWriter::new(std::fs::File::create(dst).unwrap()))
+        .unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    for idx in &summary.metadata_indexes {
+        w.write_metadata(&mcap::read::metadata(&bytes, idx).unwrap())
+            .unwrap();
+    }
+    let mut ordinals: BTreeMap<String, usize> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let mut m = m.unwrap();
+        let video = m.channel.schema.as_ref().unwrap().name == "foxglove_msgs/msg/CompressedVideo";
+        if video {
+            let o = ordinals.entry(m.channel.topic.clone()).or_default();
+            let mut f = CompressedVideo::from_cdr(&m.data).unwrap();
+            corrupt(&m.channel.topic, *o, &mut f.data);
+            m.data = f.to_cdr().into();
+            *o += 1;
+        }
+        w.write(&m).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn corrupt_h264_in_a_recording_drops_frames_to_the_next_keyframe_or_fails_only_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rig = small_franka();
+    for c in &mut rig.cameras {
+        c.encoding = Some("h264".into());
+    }
+    let good = dir.path().join("good.mcap");
+    synth_episode(&good, &rig, 6, 4.0);
+    let inputs = dir.path().join("inputs");
+    std::fs::create_dir_all(&inputs).unwrap();
+    // Frame 57 of one camera cut to its first bytes: it and the two after it up to the IDR at
+    // 60 (30 fps, an IDR a second) are dropped, a stale frame at 1 tick of 40 at most.
+    let damaged = inputs.join("episode_000000.mcap");
+    rewrite(&good, &damaged, &|topic, o, data| {
+        if topic.contains("zed_front") && o == 57 {
+            data.truncate(8);
+        }
+    });
+    // Every frame of one camera garbage: no picture at all.
+    let ruined = inputs.join("episode_000001.mcap");
+    rewrite(&good, &ruined, &|topic, _, data| {
+        if topic.contains("zed_front") {
+            data.iter_mut().for_each(|b| *b = 0x5A);
+        }
+    });
+    let ds = dir.path().join("ds");
+    let out = Command::new(scaledp_bin())
+        .args(["convert"])
+        .arg(&inputs)
+        .arg("--out")
+        .arg(&ds)
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    eprintln!("{stdout}\n{stderr}");
+    assert_eq!(out.status.code(), Some(3), "{stdout}\n{stderr}");
+    assert!(stdout.contains("1 converted"), "{stdout}");
+    let warned: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("episode_000000.mcap") && l.contains("gave no picture"))
+        .collect();
+    assert!(!warned.is_empty(), "{stderr}");
+    assert!(warned[0].contains("front"), "{}", warned[0]);
+    let failed: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.contains("episode_000001.mcap"))
+        .collect();
+    assert_eq!(failed.len(), 1, "{failed:?}");
+    assert!(
+        failed[0].contains("front") && failed[0].contains("h264 frame that decodes"),
+        "{}",
+        failed[0]
+    );
+    assert_eq!(
+        f32_rows(&ds, "action").len(),
+        f32_rows(&ds, "observation.state").len()
+    );
+}
