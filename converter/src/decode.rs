@@ -33,10 +33,13 @@ pub enum Frame {
 /// Decodes an image message (raw or compressed) from `path`.
 pub fn frame(path: &Path, m: &RawMessage) -> Result<Frame> {
     if crate::video::is_video(&m.message_type) {
-        // MCAP inputs decode video topics as they are read; bags are read whole into memory,
-        // where decoded video would not fit.
-        let reason = "a CompressedVideo camera in a ROS bag: video topics are read from MCAP \
-                      recordings (rosbag2's default storage) only";
+        // Video frames decode in stream order, which only the MCAP read does (crate::video);
+        // bags are read whole into memory, where decoded video would not fit, and the live
+        // controller decodes only the frames it picks.
+        let reason = "a CompressedVideo camera frame on its own: video topics are decoded \
+                      in stream order when `convert` reads an MCAP recording (rosbag2's \
+                      default storage), not from ROS bags read into memory nor live by \
+                      serve/eval (publish raw or JPEG images to a policy)";
         return wrap(path, m, Err(reason.to_string()));
     }
     let compressed = m.message_type.ends_with("/CompressedImage");
