@@ -37,9 +37,9 @@ pub fn frame(path: &Path, m: &RawMessage) -> Result<Frame> {
         // bags are read whole into memory, where decoded video would not fit, and the live
         // controller decodes only the frames it picks.
         let reason = "a CompressedVideo camera frame on its own: video topics are decoded \
-                      in stream order when `convert` reads an MCAP recording (rosbag2's \
-                      default storage), not from ROS bags read into memory nor live by \
-                      serve/eval (publish raw or JPEG images to a policy)";
+                      in stream order when `convert` reads an .mcap file (pass a rosbag2 \
+                      bag's .mcap files themselves), not from bags read into memory nor live \
+                      by serve/eval (publish raw or JPEG images to a policy)";
         return wrap(path, m, Err(reason.to_string()));
     }
     let compressed = m.message_type.ends_with("/CompressedImage");
