@@ -259,17 +259,27 @@ mod tests {
         }
     }
 
+    /// Cuts a frame to its first bytes (its start code): undecodable.
+    fn cut(msg: &mut Vec<u8>) {
+        let mut f = CompressedVideo::from_cdr(msg).unwrap();
+        f.data.truncate(6);
+        *msg = f.to_cdr();
+    }
+
+    /// Which frames gave a picture.
+    fn decoded(t: &mut Transcoder, msgs: &[Vec<u8>]) -> Vec<bool> {
+        run(t, msgs).iter().map(Option::is_some).collect()
+    }
+
     #[test]
     fn frames_before_the_first_keyframe_and_after_a_corrupt_one_are_dropped_until_the_next() {
         let mut msgs = stream(10, &[6]);
         // The stream joined late: frames 0 (the IDR) is missing.
         msgs.remove(0);
         // Frame 3 (index 2 now) cut to its start code: undecodable.
-        let mut cut = CompressedVideo::from_cdr(&msgs[2]).unwrap();
-        cut.data.truncate(6);
-        msgs[2] = cut.to_cdr();
+        cut(&mut msgs[2]);
         let mut t = Transcoder::default();
-        let got: Vec<bool> = run(&mut t, &msgs).iter().map(Option::is_some).collect();
+        let got = decoded(&mut t, &msgs);
         // P-frames 1-5 have no keyframe before them; the IDR at 6 starts the decoder.
         assert_eq!(
             got,
@@ -279,11 +289,9 @@ mod tests {
         assert_eq!((state.frames, state.dropped), (9, 5));
 
         let mut msgs = stream(10, &[6]);
-        let mut cut = CompressedVideo::from_cdr(&msgs[3]).unwrap();
-        cut.data.truncate(6);
-        msgs[3] = cut.to_cdr();
+        cut(&mut msgs[3]);
         let mut t = Transcoder::default();
-        let got: Vec<bool> = run(&mut t, &msgs).iter().map(Option::is_some).collect();
+        let got = decoded(&mut t, &msgs);
         assert_eq!(
             got,
             [true, true, true, false, false, false, true, true, true, true]
