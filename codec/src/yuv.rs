@@ -84,6 +84,70 @@ fn convert_row(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
     }
 }
 
+// RGB → Y'CbCr, BT.601 limited range, in 16-bit fixed point (×65536, rounded; each row of
+// chroma coefficients sums to 0 so that greys get Cb = Cr = 128 exactly).
+const R2Y: i32 = 16829; // 0.299 × 219/255
+const G2Y: i32 = 33039; // 0.587 × 219/255
+const B2Y: i32 = 6416; // 0.114 × 219/255
+const R2U: i32 = -9714; // −0.168736 × 224/255
+const G2U: i32 = -19070; // −0.331264 × 224/255
+const B2U: i32 = 28784; // 0.5 × 224/255
+const R2V: i32 = 28784; // 0.5 × 224/255
+const G2V: i32 = -24103; // −0.418688 × 224/255
+const B2V: i32 = -4681; // −0.081312 × 224/255
+
+/// Packed RGB24 (`width × height × 3` bytes) → 4:2:0 planes without padding (`y`: `width` bytes a
+/// row; `u`, `v`: half the width and height, rounded up), the inverse of
+/// [`Yuv420::write_rgb`]: BT.601 limited range (libswscale's default for `rgb24 → yuv420p`), each
+/// chroma sample the average of its 2×2 block (of the pixels there are, at an odd edge).
+pub(crate) fn rgb_to_yuv420(
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+    y: &mut [u8],
+    u: &mut [u8],
+    v: &mut [u8],
+) {
+    let (cw, ch) = (width.div_ceil(2), height.div_ceil(2));
+    assert!(rgb.len() == width * height * 3 && y.len() == width * height);
+    assert!(u.len() == cw * ch && v.len() == cw * ch);
+    luma(rgb, y);
+    let row = width * 3;
+    for (cy, (u_row, v_row)) in u
+        .chunks_exact_mut(cw)
+        .zip(v.chunks_exact_mut(cw))
+        .enumerate()
+    {
+        let top = &rgb[2 * cy * row..][..row];
+        let bottom = &rgb[(2 * cy + 1).min(height - 1) * row..][..row];
+        chroma_row(top, bottom, u_row, v_row);
+    }
+}
+
+#[multiversion::multiversion(targets("x86_64+avx2", "x86_64+ssse3", "aarch64+neon"))]
+fn luma(rgb: &[u8], y: &mut [u8]) {
+    for (px, out) in rgb.chunks_exact(3).zip(y.iter_mut()) {
+        let (r, g, b) = (i32::from(px[0]), i32::from(px[1]), i32::from(px[2]));
+        *out = ((R2Y * r + G2Y * g + B2Y * b + (16 << 16) + (1 << 15)) >> 16) as u8;
+    }
+}
+
+/// One chroma row from two RGB rows (the same row twice at an odd bottom edge).
+#[multiversion::multiversion(targets("x86_64+avx2", "x86_64+ssse3", "aarch64+neon"))]
+fn chroma_row(top: &[u8], bottom: &[u8], u: &mut [u8], v: &mut [u8]) {
+    let blocks = top.chunks(6).zip(bottom.chunks(6));
+    for ((t, b), (cu, cv)) in blocks.zip(u.iter_mut().zip(v.iter_mut())) {
+        // An odd right edge: the last pixel stands for both columns.
+        let k = t.len() - 3;
+        let sum = |c: usize| {
+            i32::from(t[c]) + i32::from(t[k + c]) + i32::from(b[c]) + i32::from(b[k + c])
+        };
+        let (r, g, b) = (sum(0), sum(1), sum(2));
+        *cu = ((R2U * r + G2U * g + B2U * b + (128 << 18) + (1 << 17)) >> 18).clamp(0, 255) as u8;
+        *cv = ((R2V * r + G2V * g + B2V * b + (128 << 18) + (1 << 17)) >> 18).clamp(0, 255) as u8;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,6 +177,78 @@ mod tests {
         // BT.601 red (Y 81, Cb 90, Cr 240) comes back near (255, 0, 0).
         let [r, g, b] = rgb(81, 90, 240);
         assert!(r >= 253 && g <= 2 && b <= 2, "{r} {g} {b}");
+    }
+
+    /// RGB → 4:2:0 → RGB through [`Yuv420::write_rgb`].
+    fn round_trip(rgb: &[u8], w: usize, h: usize) -> Vec<u8> {
+        let (cw, ch) = (w.div_ceil(2), h.div_ceil(2));
+        let (mut y, mut u, mut v) = (vec![0; w * h], vec![0; cw * ch], vec![0; cw * ch]);
+        rgb_to_yuv420(rgb, w, h, &mut y, &mut u, &mut v);
+        let planes = Yuv420 {
+            width: w,
+            height: h,
+            y: &y,
+            u: &u,
+            v: &v,
+            y_stride: w,
+            uv_stride: cw,
+        };
+        planes.check().unwrap();
+        let mut out = Vec::new();
+        planes.write_rgb(&mut out);
+        out
+    }
+
+    #[test]
+    fn rgb_to_yuv420_is_bt601_limited_range_and_inverts_write_rgb() {
+        let planes_of = |px: [u8; 3]| {
+            let (mut y, mut u, mut v) = ([0; 4], [0; 1], [0; 1]);
+            rgb_to_yuv420(&px.repeat(4), 2, 2, &mut y, &mut u, &mut v);
+            assert!(y.iter().all(|&l| l == y[0]));
+            [y[0], u[0], v[0]]
+        };
+        assert_eq!(planes_of([0, 0, 0]), [16, 128, 128]);
+        assert_eq!(planes_of([255, 255, 255]), [235, 128, 128]);
+        assert_eq!(planes_of([255, 0, 0]), [81, 90, 240]);
+        for grey in 0..=255u8 {
+            let [_, u, v] = planes_of([grey; 3]);
+            assert_eq!((u, v), (128, 128), "grey {grey}");
+            let back = round_trip(&[grey; 12], 2, 2);
+            assert!(
+                back.iter().all(|&c| c.abs_diff(grey) <= 1),
+                "grey {grey}: {back:?}"
+            );
+        }
+        let colours = [
+            [255, 0, 0],
+            [0, 255, 0],
+            [0, 0, 255],
+            [255, 255, 0],
+            [0, 255, 255],
+            [255, 0, 255],
+            [200, 120, 40],
+        ];
+        for px in colours {
+            let back = round_trip(&px.repeat(4), 2, 2);
+            for (got, want) in back.iter().zip(px.iter().cycle()) {
+                assert!(got.abs_diff(*want) <= 3, "{px:?} came back as {back:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn rgb_to_yuv420_averages_each_2x2_block_and_odd_edges() {
+        // 3×3: blocks of 4, 2 (right column), 2 (bottom row) and 1 pixel(s).
+        let rgb: Vec<u8> = (0..9u8).flat_map(|i| [i * 20; 3]).collect();
+        let (mut y, mut u, mut v) = ([0; 9], [0; 4], [0; 4]);
+        rgb_to_yuv420(&rgb, 3, 3, &mut y, &mut u, &mut v);
+        assert_eq!((u, v), ([128; 4], [128; 4]));
+        // Blue only in the top left pixel: a quarter of pure blue's chroma offset.
+        let mut rgb = [0u8; 12];
+        rgb[2] = 255;
+        let (mut y, mut u, mut v) = ([0; 4], [0; 1], [0; 1]);
+        rgb_to_yuv420(&rgb, 2, 2, &mut y, &mut u, &mut v);
+        assert_eq!((u[0], v[0]), (128 + 28, 128 - 5));
     }
 
     #[test]
