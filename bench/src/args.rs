@@ -87,6 +87,10 @@ pub struct BenchConvertArgs {
     /// which `bash scripts/setup-python.sh` makes).
     #[arg(long, value_name = "PYTHON")]
     pub python: Option<PathBuf>,
+    /// Also convert with the cameras as video features in these codecs (av1, h264), beside
+    /// JPEG at qualities 50, 75 and 90, and print frames/s, size and PSNR against JPEG q100.
+    #[arg(long, value_name = "CODEC", value_delimiter = ',', value_parser = ["av1", "h264"])]
+    pub video: Vec<String>,
 }
 
 /// `scaledp bench load`.

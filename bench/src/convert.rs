@@ -76,6 +76,10 @@ pub fn run(args: BenchConvertArgs) -> Result<Outcome> {
     print_header(&args, &rig, &input, cores, jobs);
     print_routes(&input, &ours, &python, &dirs.python)?;
     print_s3_and_floor(&input, &ours, &s3, &floor);
+    if !args.video.is_empty() {
+        let exe = std::env::current_exe().context("locating the scaledp executable")?;
+        crate::convert_video::run(&exe, &dirs.recordings, &dirs.root, jobs, &args.video)?;
+    }
     println!(
         "machine load (1-minute average, {cores} cores): {} before this benchmark, {} after",
         load_before.map_or("n/a".into(), |l| format!("{l:.2}")),

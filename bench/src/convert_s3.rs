@@ -109,6 +109,7 @@ pub(crate) fn floor_route(
         width: 320,
         height: 240,
         quality: 90,
+        raw: false,
     };
     let cpu_before = cpu_seconds(std::process::id());
     let report = scaledp_converter::floor(&inputs, stride, &spec, jobs)?;

@@ -33,6 +33,7 @@
 mod args;
 mod convert;
 mod convert_s3;
+mod convert_video;
 mod disk;
 mod load;
 mod python;

@@ -66,6 +66,13 @@ pub fn run_inputs(
         }
         None => inputs.to_vec(),
     };
+    if let (Location::Object(_), Some(_)) = (out, opts.convert.video) {
+        return Err(Error::input(
+            out.as_path(),
+            "video features (--video) are written to local datasets only for now; convert \
+             to a local directory and upload it",
+        ));
+    }
     let mut dest = Destination::open(
         out,
         opts.overwrite,

@@ -4,6 +4,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
+use scaledp_codec::{EncodedVideo, VideoEncoder, VideoSettings};
 use scaledp_schema::rig::Rig;
 
 use crate::actions::command_actions;
@@ -21,8 +23,10 @@ use crate::source::Recording;
 pub struct CameraFrames {
     /// Camera name (feature `observation.images.<name>`).
     pub name: String,
-    /// JPEG bytes per frame.
+    /// JPEG bytes per frame (empty when the camera is stored as video).
     pub jpeg: Vec<Vec<u8>>,
+    /// The frames encoded as one video stream, for a dataset of video features.
+    pub video: Option<EncodedVideo>,
     /// Pixel statistics over the resized frames.
     pub histogram: ChannelHistogram,
 }
@@ -56,6 +60,8 @@ pub struct Episode {
     pub image_size: (u32, u32),
     /// JPEG quality of the frames.
     pub jpeg_quality: u8,
+    /// How the cameras are stored as video (None: as JPEG images).
+    pub video: Option<VideoSettings>,
     /// What alignment measured.
     pub report: AlignmentReport,
     /// `header.stamp` or `log_time`.
@@ -274,7 +280,9 @@ fn tick_states(
 }
 
 /// Each camera's chosen frame at each of the first `frames` ticks: decoded, resized and
-/// JPEG-encoded once (in parallel), with the episode's pixel statistics.
+/// JPEG-encoded once (in parallel), with the episode's pixel statistics; or, with `video`, the
+/// resized frames of each camera encoded as one stream (the cameras in parallel).
+#[allow(clippy::too_many_arguments)]
 fn camera_frames(
     path: &Path,
     rig: &Rig,
@@ -283,6 +291,7 @@ fn camera_frames(
     aligned: &Alignment,
     frames: usize,
     spec: &EncodeSpec,
+    video: Option<VideoSettings>,
 ) -> Result<Vec<CameraFrames>> {
     let mut wanted: BTreeMap<String, BTreeSet<usize>> = BTreeMap::new();
     for (ci, cam) in rig.cameras.iter().enumerate() {
@@ -293,10 +302,10 @@ fn camera_frames(
         );
     }
     let done = store.encode(path, &wanted, spec)?;
-    let mut cameras = Vec::with_capacity(rig.cameras.len());
-    for (ci, cam) in rig.cameras.iter().enumerate() {
+    let one = |ci: usize| -> Result<CameraFrames> {
+        let cam = &rig.cameras[ci];
         let mut histogram = ChannelHistogram::default();
-        let mut jpeg = Vec::with_capacity(frames);
+        let mut picked = Vec::with_capacity(frames);
         for f in &aligned.frames[..frames] {
             let ordinal = cams[ci].ordinals[f[ci]];
             let e = done
@@ -309,15 +318,31 @@ fn camera_frames(
                     ),
                 })?;
             histogram.absorb(&e.histogram);
-            jpeg.push(e.jpeg.clone());
+            picked.push(&e.bytes);
         }
-        cameras.push(CameraFrames {
+        let (jpeg, video) = match video {
+            None => (picked.into_iter().cloned().collect(), None),
+            Some(settings) => {
+                let failed = |e: scaledp_codec::EncodeError| Error::Rejected {
+                    path: path.into(),
+                    reason: format!("camera '{}': {e}", cam.name),
+                };
+                let mut enc =
+                    VideoEncoder::new(settings, spec.width, spec.height).map_err(failed)?;
+                for rgb in picked {
+                    enc.push_rgb(rgb).map_err(failed)?;
+                }
+                (Vec::new(), Some(enc.finish().map_err(failed)?))
+            }
+        };
+        Ok(CameraFrames {
             name: cam.name.clone(),
             jpeg,
+            video,
             histogram,
-        });
-    }
-    Ok(cameras)
+        })
+    };
+    (0..rig.cameras.len()).into_par_iter().map(one).collect()
 }
 
 /// Converts one recording: picks the rig, aligns the camera and joint streams on a tick grid,
@@ -387,7 +412,17 @@ pub fn convert(
         .collect();
 
     let spec = opts.encode_spec();
-    let cameras = camera_frames(path, &rig, frames_store, &cams, &aligned, frames, &spec)?;
+    let video = opts.video.map(|codec| VideoSettings::lerobot(codec, fps));
+    let cameras = camera_frames(
+        path,
+        &rig,
+        frames_store,
+        &cams,
+        &aligned,
+        frames,
+        &spec,
+        video,
+    )?;
     let joint_names = rig
         .arms
         .iter()
@@ -412,6 +447,7 @@ pub fn convert(
         cameras,
         image_size: (spec.width, spec.height),
         jpeg_quality: spec.quality,
+        video,
         report: aligned.report,
         time_source: if opts.use_log_time {
             "log_time".into()

@@ -366,11 +366,7 @@ pub(crate) fn read_mcap_from(
     prefetch: Option<&ConvertOptions>,
     hasher: Option<&mut blake3::Hasher>,
 ) -> Result<(Recording, McapFrames)> {
-    let spec = prefetch.map(|o| EncodeSpec {
-        width: o.width,
-        height: o.height,
-        quality: o.jpeg_quality,
-    });
+    let spec = prefetch.map(ConvertOptions::encode_spec);
     let mut selector = prefetch.map(Selector::new);
     let mut messages = Vec::new();
     let mut stamps: BTreeMap<String, Vec<(u64, u64)>> = BTreeMap::new();

@@ -377,6 +377,7 @@ mod tests {
             width: 16,
             height: 12,
             quality: 80,
+            raw: false,
         };
         let path = Path::new("fuzz.mcap");
         let mut findings = Vec::new();

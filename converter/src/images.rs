@@ -80,13 +80,17 @@ pub struct EncodeSpec {
     pub height: u32,
     /// JPEG quality (1–100).
     pub quality: u8,
+    /// Keep the resized RGB pixels instead of encoding them to JPEG (for a dataset whose
+    /// cameras are stored as video: the episode's frames are encoded together).
+    pub raw: bool,
 }
 
-/// A camera frame resized and JPEG-encoded, with the histogram of its resized pixels.
+/// A camera frame resized and JPEG-encoded (or kept as RGB, see [`EncodeSpec::raw`]), with the
+/// histogram of its resized pixels.
 #[derive(Debug, Clone)]
 pub struct EncodedFrame {
-    /// JPEG bytes.
-    pub jpeg: Vec<u8>,
+    /// JPEG bytes, or packed RGB8 rows when the spec asks for raw pixels.
+    pub bytes: Vec<u8>,
     /// Pixel statistics of the resized frame.
     pub histogram: ChannelHistogram,
 }
@@ -237,12 +241,16 @@ pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> ImageResult<
     })
 }
 
-/// Resized RGB → JPEG and histogram.
-fn finish(small: &Rgb, spec: &EncodeSpec) -> ImageResult<EncodedFrame> {
-    let jpeg = jpeg(small, spec.quality)?;
+/// Resized RGB → JPEG (or the pixels themselves) and histogram.
+fn finish(small: Rgb, spec: &EncodeSpec) -> ImageResult<EncodedFrame> {
     let mut histogram = ChannelHistogram::default();
-    histogram.add(small);
-    Ok(EncodedFrame { jpeg, histogram })
+    histogram.add(&small);
+    let bytes = if spec.raw {
+        small.data
+    } else {
+        jpeg(&small, spec.quality)?
+    };
+    Ok(EncodedFrame { bytes, histogram })
 }
 
 /// One camera message of `path` (raw or compressed, either serialization) → resized JPEG and
@@ -266,7 +274,7 @@ pub fn encode_message(
     if serialization == Serialization::Cdr && !compressed {
         let view = ImageView::from_cdr(data).map_err(err)?;
         let small = resized_rgb(&view, spec.width, spec.height).map_err(err)?;
-        return finish(&small, spec).map_err(err);
+        return finish(small, spec).map_err(err);
     }
     let m = RawMessage {
         topic: topic.into(),
@@ -278,7 +286,7 @@ pub fn encode_message(
     let f = crate::decode::frame(path, &m)?;
     let rgb = to_rgb(&f).map_err(err)?;
     let small = resize(&rgb, spec.width, spec.height).map_err(err)?;
-    finish(&small, spec).map_err(err)
+    finish(small, spec).map_err(err)
 }
 
 /// Tightly packed RGB8 pixels.

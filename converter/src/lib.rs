@@ -80,6 +80,7 @@ pub use objects::{collect, Input, ObjectInput};
 pub use options::{ConvertOptions, JobOptions};
 pub use ros1::read_ros1_bag;
 pub use rosbag2::read_rosbag2;
+pub use scaledp_codec::Codec as VideoCodec;
 pub use scaledp_store::{Location, ObjectUrl};
 pub use source::{RawMessage, Recording, Serialization, TopicInfo};
 pub use stats::Stats;

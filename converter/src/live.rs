@@ -80,7 +80,7 @@ pub fn encode_frame(
 ) -> Result<Vec<u8>> {
     let path = Path::new("live");
     crate::images::encode_message(path, "camera", message_type, 0, serialization, data, spec)
-        .map(|e| e.jpeg)
+        .map(|e| e.bytes)
 }
 
 #[cfg(test)]
@@ -200,6 +200,7 @@ mod tests {
             width: 40,
             height: 30,
             quality: 85,
+            raw: false,
         };
         // The ticks, on the converter's grid (`align::first_tick` from the streams' first
         // stamps), from the first one the episode kept (invalid ticks at the start are trimmed).

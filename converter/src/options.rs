@@ -6,6 +6,7 @@
 use scaledp_schema::rig::Rig;
 
 use crate::images::EncodeSpec;
+use scaledp_codec::Codec;
 
 /// How to convert one input, set with chained setters. Defaults: the rig given, else the one
 /// stored in the recording, else one detected; the rig's control rate; 320×240 JPEG at quality
@@ -65,6 +66,9 @@ pub struct ConvertOptions {
     /// back in order; further back is a clock jump.
     #[doc(hidden)]
     pub reorder_window_s: f64,
+    /// Store cameras as video features in this codec instead of JPEG images.
+    #[doc(hidden)]
+    pub video: Option<Codec>,
 }
 
 impl ConvertOptions {
@@ -122,6 +126,13 @@ impl ConvertOptions {
         self.reorder_window_s = seconds;
         self
     }
+    /// Stores the cameras as LeRobot video features (MP4, one file per camera and file index,
+    /// episodes concatenated) encoded with `codec` at LeRobot's settings (yuv420p, a keyframe
+    /// every 2 frames, CRF 30), instead of JPEG image features (default: images).
+    pub fn video(mut self, codec: Option<Codec>) -> Self {
+        self.video = codec;
+        self
+    }
     /// Whether a message logged at `log_ns` is inside the window converted.
     pub(crate) fn in_window(&self, log_ns: u64) -> bool {
         self.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns))
@@ -136,6 +147,7 @@ impl ConvertOptions {
             width: self.width,
             height: self.height,
             quality: self.jpeg_quality,
+            raw: self.video.is_some(),
         }
     }
 }
@@ -155,6 +167,7 @@ impl Default for ConvertOptions {
             window_ns: None,
             topic_overrides: Vec::new(),
             reorder_window_s: 0.1,
+            video: None,
         }
     }
 }

@@ -5,33 +5,8 @@
 //! frame (pyav backend, scaled back to 0-255): tolerance 0, bit for bit.
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
-use std::process::Command;
-
 use scaledp_datasets::LoaderOptions;
-use scaledp_testkit::{workspace_root, BENCH_VENV};
-
-/// Runs `tests/py/lerobot_video.py` with `args` on the LeRobot venv; its JSON output.
-fn lerobot(args: &[&str], home: &Path) -> serde_json::Value {
-    let root = workspace_root();
-    let py = BENCH_VENV
-        .python(None, Some(&root))
-        .unwrap_or_else(|e| panic!("{e} (scripts/test.sh does)"));
-    let out = Command::new(py)
-        .arg(root.join("tests/py/lerobot_video.py"))
-        .args(args)
-        .env("HF_HOME", home)
-        .env("HF_HUB_OFFLINE", "1")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "lerobot_video.py {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
-}
+use scaledp_testkit::lerobot_video as lerobot;
 
 #[test]
 fn frames_equal_lerobot_datasets_own_for_a_dataset_lerobot_wrote() {

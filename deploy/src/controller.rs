@@ -388,6 +388,7 @@ impl Controller {
             width: sw,
             height: sh,
             quality: self.chain.jpeg_quality(),
+            raw: false,
         };
         let per = 3 * w as usize * h as usize;
         let mut images = vec![0u8; per * self.frames.len()];

@@ -24,5 +24,7 @@ pub use moto::Moto;
 pub use net::{free_endpoint, free_port, loopback_endpoint};
 pub use process::{cpu_seconds, cpu_seconds_at, load_average, measure, vm_hwm, Measured};
 pub use proxy::{Hook, Proxy, ProxyState};
-pub use python::{python, run_python, scaledp_data_wheel, Venv, BENCH_VENV, TEST_VENV};
+pub use python::{
+    lerobot_video, python, run_python, scaledp_data_wheel, Venv, BENCH_VENV, TEST_VENV,
+};
 pub use workspace::{find_workspace, workspace_from_current_dir, workspace_root};

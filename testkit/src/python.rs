@@ -117,6 +117,34 @@ pub fn run_python(script: &str, args: &[&Path]) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{script} printed no JSON: {e}"))
 }
 
+/// Runs `tests/py/lerobot_video.py` with `args` on LeRobot 0.4.4's Python ([`BENCH_VENV`]),
+/// with `HF_HOME` at `home` and the Hub offline; the last line it prints, parsed as JSON.
+///
+/// # Panics
+/// When the venv is missing (saying what to run), or the script fails or prints no JSON.
+pub fn lerobot_video(args: &[&str], home: &Path) -> serde_json::Value {
+    let root = workspace_root();
+    let py = BENCH_VENV
+        .python(None, Some(&root))
+        .unwrap_or_else(|e| panic!("{e} (scripts/test.sh does)"));
+    let out = Command::new(py)
+        .arg(root.join("tests/py/lerobot_video.py"))
+        .args(args)
+        .env("HF_HOME", home)
+        .env("HF_HUB_OFFLINE", "1")
+        .output()
+        .unwrap_or_else(|e| panic!("running lerobot_video.py: {e}"));
+    assert!(
+        out.status.success(),
+        "lerobot_video.py {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let last = stdout.lines().last().unwrap_or_default();
+    serde_json::from_str(last)
+        .unwrap_or_else(|e| panic!("lerobot_video.py {args:?} printed no JSON ({e}): {stdout}"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -305,6 +305,15 @@ pub struct RecoverArgs {
     pub work_dir: Option<PathBuf>,
 }
 
+/// A codec for `convert --video`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum VideoArg {
+    /// AV1 (rav1e), LeRobot's default.
+    Av1,
+    /// H.264 (openh264).
+    H264,
+}
+
 /// `scaledp convert`.
 #[derive(Debug, Args)]
 pub struct ConvertArgs {
@@ -333,6 +342,10 @@ pub struct ConvertArgs {
     /// JPEG quality of the stored images.
     #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
     pub jpeg_quality: u8,
+    /// Store the cameras as LeRobot video features (MP4 under videos/, LeRobot's settings:
+    /// yuv420p, a keyframe every 2 frames, CRF 30) instead of JPEG images in the Parquet files.
+    #[arg(long, value_enum, value_name = "CODEC")]
+    pub video: Option<VideoArg>,
     /// Task instruction for inputs that store none (bags).
     #[arg(long)]
     pub task: Option<String>,

@@ -67,7 +67,7 @@ impl FrameStore for NoPixels {
                 (
                     k,
                     EncodedFrame {
-                        jpeg: Vec::new(),
+                        bytes: Vec::new(),
                         histogram: ChannelHistogram::default(),
                     },
                 )

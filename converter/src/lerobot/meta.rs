@@ -7,6 +7,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::columns::{self as col, stage, stage_parquet, Staged};
+use super::videos::{VideoFormat, VideoSpan, VIDEO_FILE_SIZE_MB};
 use crate::align::AlignmentReport;
 use crate::error::{Error, Result};
 use crate::stats::{aggregate_all, Stats, QUANTILES};
@@ -43,6 +44,9 @@ pub struct EpisodeRecord {
     pub report: AlignmentReport,
     /// `header.stamp` or `log_time`.
     pub time_source: String,
+    /// Where its frames are in the camera videos (datasets of video features).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<VideoSpan>,
 }
 
 /// Everything needed to rebuild the LeRobot meta files, and to resume or merge.
@@ -61,6 +65,9 @@ pub struct Sidecar {
     /// JPEG quality of the images (absent in datasets written before it was recorded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jpeg_quality: Option<u8>,
+    /// How the cameras are encoded when they are video features (None: JPEG images).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<VideoFormat>,
     /// Camera names, in column order.
     pub cameras: Vec<String>,
     /// Names of state / action dimensions.
@@ -110,10 +117,21 @@ fn features_json(s: &Sidecar) -> serde_json::Value {
     let (w, h) = s.image_size;
     let mut m = serde_json::Map::new();
     for c in &s.cameras {
-        m.insert(
-            format!("observation.images.{c}"),
-            serde_json::json!({"dtype": "image", "shape": [h, w, 3], "names": ["height", "width", "channels"]}),
-        );
+        let mut f = serde_json::json!({"dtype": "image", "shape": [h, w, 3], "names": ["height", "width", "channels"]});
+        if let Some(v) = &s.video {
+            f["dtype"] = "video".into();
+            f["info"] = serde_json::json!({
+                "video.height": h,
+                "video.width": w,
+                "video.codec": v.codec,
+                "video.pix_fmt": v.pix_fmt,
+                "video.is_depth_map": false,
+                "video.fps": fps_json(s.fps),
+                "video.channels": 3,
+                "has_audio": false,
+            });
+        }
+        m.insert(format!("observation.images.{c}"), f);
     }
     let vector = |names: &[String]| serde_json::json!({"dtype": "float32", "shape": [names.len()], "names": names});
     m.insert("observation.state".into(), vector(&s.state_names));
@@ -135,7 +153,7 @@ fn features_json(s: &Sidecar) -> serde_json::Value {
 /// The `huggingface` schema metadata `datasets` writes for the data files.
 pub fn huggingface_metadata(s: &Sidecar) -> String {
     let mut f = serde_json::Map::new();
-    for c in &s.cameras {
+    for c in s.cameras.iter().filter(|_| s.video.is_none()) {
         f.insert(
             format!("observation.images.{c}"),
             serde_json::json!({"_type": "Image"}),
@@ -188,11 +206,11 @@ pub fn stage_all(
         "total_tasks": s.tasks.len(),
         "chunks_size": CHUNKS_SIZE,
         "data_files_size_in_mb": data_files_size_mb,
-        "video_files_size_in_mb": 200,
+        "video_files_size_in_mb": VIDEO_FILE_SIZE_MB,
         "fps": fps_json(s.fps),
         "splits": {"train": format!("0:{}", s.episodes.len())},
         "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
-        "video_path": null,
+        "video_path": s.video.as_ref().map(|_| "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"),
         "features": features_json(s),
         "scaledp": {
             "converter_version": s.converter_version,
@@ -200,6 +218,7 @@ pub fn stage_all(
             "fps": s.fps,
             "image_size": [s.image_size.0, s.image_size.1],
             "jpeg_quality": s.jpeg_quality,
+            "video": s.video,
             "action": "absolute end-effector pose of the next tick (the last tick of each episode is dropped): per arm in rig order x, y, z (m), roll, pitch, yaw (rad, ROS R = Rz(yaw)·Ry(pitch)·Rx(roll), unwrapped along the episode), gripper opening (m); observation.state is the same at the current tick",
             "kinematics": "built-in DH models (fr3/panda: modified DH, pose of the Franka Hand TCP — flange + 0.1034 m along z, −45° about z — in fr3_link0; ur5/ur5e: standard DH, pose of tool0 in the DH base frame) unless the rig names a URDF chain or a TCP offset",
             "time_alignment": "ticks at fps on header.stamp capture times, starting a quarter frame period after the latest camera's first frame so synchronised cameras pick the same capture; latest camera frame at or before each tick; joints linearly interpolated",
@@ -220,6 +239,39 @@ pub fn stage_all(
     write_tasks(root, &s.tasks, staged)?;
     if !s.episodes.is_empty() {
         write_episodes(root, s, staged)?;
+    }
+    Ok(())
+}
+
+/// The episodes metadata's columns of each video key, as LeRobot names them.
+fn video_columns(
+    root: &Path,
+    s: &Sidecar,
+    cols: &mut Vec<(String, arrow_array::ArrayRef)>,
+) -> Result<()> {
+    let spans: Vec<&VideoSpan> = s
+        .episodes
+        .iter()
+        .map(|e| {
+            e.video.as_ref().ok_or_else(|| Error::Dataset {
+                path: root.into(),
+                reason: format!("episode {} has no video span", e.episode_index),
+            })
+        })
+        .collect::<Result<_>>()?;
+    for c in &s.cameras {
+        let key = format!("videos/observation.images.{c}");
+        let files = |f: fn(u64) -> u64| col::i64s(spans.iter().map(move |v| f(v.file) as i64));
+        cols.push((format!("{key}/chunk_index"), files(|n| n / CHUNKS_SIZE)));
+        cols.push((format!("{key}/file_index"), files(|n| n % CHUNKS_SIZE)));
+        cols.push((
+            format!("{key}/from_timestamp"),
+            col::f64s(spans.iter().map(|v| v.from_timestamp)),
+        ));
+        cols.push((
+            format!("{key}/to_timestamp"),
+            col::f64s(spans.iter().map(|v| v.to_timestamp)),
+        ));
     }
     Ok(())
 }
@@ -263,6 +315,9 @@ fn write_episodes(root: &Path, s: &Sidecar, staged: &mut Staged) -> Result<()> {
         ("dataset_from_index".into(), u(|e| e.from_index)),
         ("dataset_to_index".into(), u(|e| e.to_index)),
     ];
+    if s.video.is_some() {
+        video_columns(root, s, &mut cols)?;
+    }
     for feature in feature_names(s) {
         let per: Vec<&Stats> = eps
             .iter()

@@ -10,14 +10,18 @@
 mod columns;
 mod meta;
 mod repair;
+mod videos;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use arrow_array::{ArrayRef, RecordBatch};
+use scaledp_codec::EncodedVideo;
 
 pub use meta::{data_path, EpisodeRecord, Sidecar};
 use repair::read_row_group;
+use videos::VideoTail;
+pub use videos::{VideoFormat, VideoSpan, VIDEO_FILE_SIZE_MB};
 
 use crate::episode::Episode;
 use crate::error::{Error, Result};
@@ -43,6 +47,8 @@ pub struct Dataset {
     root: PathBuf,
     sidecar: Option<Sidecar>,
     tail: Option<Tail>,
+    /// The video file still open (datasets whose cameras are video features).
+    video_tail: Option<VideoTail>,
     file_size_mb: u64,
 }
 
@@ -58,7 +64,7 @@ impl Dataset {
     /// repairing what a killed job may have left.
     pub fn open(root: &Path, overwrite: bool, file_size_mb: u64) -> Result<Self> {
         if overwrite && root.exists() {
-            for sub in ["data", "meta"] {
+            for sub in ["data", "meta", "videos"] {
                 let p = root.join(sub);
                 if p.exists() {
                     std::fs::remove_dir_all(&p).map_err(Error::io(&p))?;
@@ -85,6 +91,7 @@ impl Dataset {
             root: root.into(),
             sidecar,
             tail: None,
+            video_tail: None,
             file_size_mb,
         };
         ds.repair()?;
@@ -100,6 +107,7 @@ impl Dataset {
             root: root.into(),
             sidecar,
             tail: None,
+            video_tail: None,
             file_size_mb,
         })
     }
@@ -161,7 +169,13 @@ impl Dataset {
                 "{} fps {:?} images, the dataset has {} fps {:?}",
                 ep.fps, ep.image_size, s.fps, s.image_size
             ))
-        } else if s.jpeg_quality.is_some_and(|q| q != ep.jpeg_quality) {
+        } else if s.video != ep.video.as_ref().map(VideoFormat::of) {
+            Some(format!(
+                "cameras as {}, the dataset has them as {}",
+                stored_as(ep.video.as_ref().map(VideoFormat::of).as_ref()),
+                stored_as(s.video.as_ref())
+            ))
+        } else if s.video.is_none() && s.jpeg_quality.is_some_and(|q| q != ep.jpeg_quality) {
             Some(format!(
                 "JPEG quality {}, the dataset has {:?}",
                 ep.jpeg_quality, s.jpeg_quality
@@ -200,11 +214,15 @@ impl Dataset {
                 ep.joints.len()
             ))
         } else {
-            ep.cameras.iter().find(|c| c.jpeg.len() != n).map(|c| {
+            let frames = |c: &crate::episode::CameraFrames| match &c.video {
+                Some(v) => v.samples.len(),
+                None => c.jpeg.len(),
+            };
+            ep.cameras.iter().find(|c| frames(c) != n).map(|c| {
                 format!(
                     "camera '{}' has {} frames, the episode {n}",
                     c.name,
-                    c.jpeg.len()
+                    frames(c)
                 )
             })
         };
@@ -234,7 +252,8 @@ impl Dataset {
                 robot_type: ep.rig.name.clone(),
                 rig: toml::to_string(&ep.rig).unwrap_or_default(),
                 image_size: ep.image_size,
-                jpeg_quality: Some(ep.jpeg_quality),
+                jpeg_quality: ep.video.is_none().then_some(ep.jpeg_quality),
+                video: ep.video.as_ref().map(VideoFormat::of),
                 cameras: ep.cameras.iter().map(|c| c.name.clone()).collect(),
                 state_names: ep.state_names.clone(),
                 joint_names: ep.joint_names.clone(),
@@ -247,6 +266,7 @@ impl Dataset {
         let mut cols: Vec<(String, ArrayRef)> = ep
             .cameras
             .iter()
+            .filter(|c| c.video.is_none())
             .map(|c| {
                 (
                     format!("observation.images.{}", c.name),
@@ -295,7 +315,10 @@ impl Dataset {
             report: ep.report.clone(),
             time_source: ep.time_source.clone(),
         };
-        self.commit(cols, n, &ep.task, stats, provenance)
+        let streams: Vec<EncodedVideo> =
+            ep.cameras.iter().filter_map(|c| c.video.clone()).collect();
+        let video = (!streams.is_empty()).then_some(streams);
+        self.commit(cols, n, &ep.task, stats, provenance, video)
     }
 
     /// Appends one episode of another scaledp dataset (for `merge`), re-indexed.
@@ -305,6 +328,12 @@ impl Dataset {
         o: &Sidecar,
         rec: &EpisodeRecord,
     ) -> Result<EpisodeRecord> {
+        if o.video.is_some() {
+            return Err(derr(
+                other,
+                "its cameras are video features; merging video datasets is not supported yet",
+            ));
+        }
         match &self.sidecar {
             None => {
                 let mut s = o.clone();
@@ -354,7 +383,7 @@ impl Dataset {
             report: rec.report.clone(),
             time_source: rec.time_source.clone(),
         };
-        self.commit(cols, frames, task, stats, provenance)
+        self.commit(cols, frames, task, stats, provenance, None)
     }
 
     fn commit(
@@ -364,6 +393,7 @@ impl Dataset {
         task: &str,
         mut stats: BTreeMap<String, Stats>,
         provenance: Provenance,
+        video: Option<Vec<EncodedVideo>>,
     ) -> Result<EpisodeRecord> {
         let s = self
             .sidecar
@@ -420,6 +450,17 @@ impl Dataset {
         // metadata lists is a few syscalls long (and `open` repairs even that).
         let mut staged = columns::Staged::default();
         let size = columns::stage_parquet(&path, &tail.batches, &mut staged)?;
+        let video = match video {
+            None => None,
+            Some(streams) => Some(stage_video(
+                &self.root,
+                &mut self.video_tail,
+                s,
+                streams,
+                n as u64,
+                &mut staged,
+            )?),
+        };
         let record = EpisodeRecord {
             episode_index,
             length: n as u64,
@@ -433,7 +474,11 @@ impl Dataset {
             stats,
             report: provenance.report,
             time_source: provenance.time_source,
+            video: video.as_ref().map(|v| v.0.clone()),
         };
+        if video.is_some_and(|v| v.1 >= VIDEO_FILE_SIZE_MB << 20) {
+            self.video_tail = None;
+        }
         if size >= self.file_size_mb << 20 {
             self.tail = None;
         }
@@ -442,4 +487,40 @@ impl Dataset {
         staged.commit()?;
         Ok(record)
     }
+}
+
+/// How cameras are stored, for a mismatch message.
+fn stored_as(v: Option<&VideoFormat>) -> String {
+    v.map_or("JPEG images".into(), |v| format!("{} video", v.codec))
+}
+
+/// Appends an episode's streams to the open video file (a new one when none is open or the
+/// streams do not fit it) and stages its MP4s; the episode's span and the largest MP4's size.
+fn stage_video(
+    root: &Path,
+    tail: &mut Option<VideoTail>,
+    s: &Sidecar,
+    streams: Vec<EncodedVideo>,
+    frames: u64,
+    staged: &mut columns::Staged,
+) -> Result<(VideoSpan, u64)> {
+    let refs: Vec<&EncodedVideo> = streams.iter().collect();
+    if tail.as_ref().is_some_and(|t| !t.accepts(&refs)) {
+        *tail = None;
+    }
+    let t = tail.get_or_insert_with(|| {
+        let next = s
+            .episodes
+            .iter()
+            .filter_map(|e| e.video.as_ref().map(|v| v.file + 1))
+            .max()
+            .unwrap_or(0);
+        VideoTail::new(next, s.cameras.len())
+    });
+    let keys: Vec<String> = s
+        .cameras
+        .iter()
+        .map(|c| format!("observation.images.{c}"))
+        .collect();
+    t.add_and_stage(root, &keys, streams, frames, s.fps, staged)
 }

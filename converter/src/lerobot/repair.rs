@@ -10,6 +10,7 @@ use arrow_array::RecordBatch;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
 use super::meta::{self, data_path};
+use super::videos::video_path;
 use super::{columns, derr, Dataset};
 use crate::error::{Error, Result};
 
@@ -54,6 +55,61 @@ fn num_rows(path: &Path) -> Result<(u64, usize)> {
 }
 
 impl Dataset {
+    /// Removes video files (and temporary ones) that no committed episode lists. A listed file
+    /// may hold frames of an episode that was never committed at its end: readers go by each
+    /// episode's span, and the next episode starts a new file.
+    fn remove_unlisted_videos(&self) -> Result<()> {
+        let videos = self.root.join("videos");
+        if !videos.exists() {
+            return Ok(());
+        }
+        let (cameras, spans): (Vec<String>, Vec<u64>) = match &self.sidecar {
+            Some(s) => (
+                s.cameras
+                    .iter()
+                    .map(|c| format!("observation.images.{c}"))
+                    .collect(),
+                s.episodes
+                    .iter()
+                    .filter_map(|e| e.video.as_ref().map(|v| v.file))
+                    .collect(),
+            ),
+            None => (vec![], vec![]),
+        };
+        let mut files = Vec::new();
+        for key in std::fs::read_dir(&videos)
+            .map_err(Error::io(&videos))?
+            .flatten()
+        {
+            for chunk in std::fs::read_dir(key.path())
+                .into_iter()
+                .flatten()
+                .flatten()
+            {
+                files.extend(
+                    std::fs::read_dir(chunk.path())
+                        .into_iter()
+                        .flatten()
+                        .flatten()
+                        .map(|f| f.path()),
+                );
+            }
+        }
+        for p in files {
+            let known = cameras
+                .iter()
+                .any(|c| spans.iter().any(|&n| video_path(&self.root, c, n) == p));
+            if !known {
+                tracing::warn!(
+                    "{}: not part of the dataset (left by a killed job); removed",
+                    p.display()
+                );
+                std::fs::remove_file(&p).map_err(Error::io(&p))?;
+            }
+        }
+        Ok(())
+    }
+
     /// Removes temporary files, files no episode lists, and rows the record does not list.
     pub(super) fn repair(&mut self) -> Result<()> {
         let mut listed: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
@@ -82,6 +138,7 @@ impl Dataset {
                 }
             }
         }
+        self.remove_unlisted_videos()?;
         for (&file, lengths) in &listed {
             let path = data_path(&self.root, file);
             let (rows, groups) = num_rows(&path)?;

@@ -7,11 +7,11 @@ use std::time::Instant;
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use scaledp_converter::{
-    ConvertOptions, InputResult, JobOptions, Location, MergeOptions, Progress,
+    ConvertOptions, InputResult, JobOptions, Location, MergeOptions, Progress, VideoCodec,
 };
 use scaledp_schema::Rig;
 
-use crate::cli::{ConvertArgs, ExitStatus, MergeArgs};
+use crate::cli::{ConvertArgs, ExitStatus, MergeArgs, VideoArg};
 use crate::shared::location;
 
 pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
@@ -35,7 +35,11 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
         .stale_periods(args.stale_periods)
         .max_invalid_fraction(args.max_invalid)
         .use_log_time(args.log_time)
-        .reorder_window(args.reorder_window);
+        .reorder_window(args.reorder_window)
+        .video(args.video.map(|v| match v {
+            VideoArg::Av1 => VideoCodec::Av1,
+            VideoArg::H264 => VideoCodec::H264,
+        }));
     if let Some(rig) = rig {
         convert = convert.rig(rig);
     }
