@@ -32,11 +32,6 @@ const U2B: i32 = 16525;
 const U2G: i32 = -3209;
 const V2G: i32 = -6660;
 
-#[inline(always)]
-fn mulhi(a: i32, b: i32) -> i32 {
-    (a * b) >> 16
-}
-
 impl Yuv420<'_> {
     /// Checks that the planes hold `width × height` pixels at their strides.
     pub fn check(&self) -> Result<(), String> {
@@ -59,6 +54,28 @@ impl Yuv420<'_> {
         Ok(())
     }
 
+    /// Writes channel-first RGB (the R plane, then G, then B; `width × height` bytes each) into
+    /// `dst`, which must hold `3 × width × height` bytes: the same values as [`Self::write_rgb`].
+    pub fn write_chw(self, dst: &mut [u8]) {
+        let plane = self.width * self.height;
+        let (r, rest) = dst[..3 * plane].split_at_mut(plane);
+        let (g, b) = rest.split_at_mut(plane);
+        let cw = self.width.div_ceil(2);
+        for row in 0..self.height {
+            let y = &self.y[row * self.y_stride..][..self.width];
+            let c = (row / 2) * self.uv_stride;
+            let at = row * self.width..(row + 1) * self.width;
+            convert_row_planar(
+                y,
+                &self.u[c..c + cw],
+                &self.v[c..c + cw],
+                &mut r[at.clone()],
+                &mut g[at.clone()],
+                &mut b[at],
+            );
+        }
+    }
+
     /// Writes interleaved RGB (`width × height × 3` bytes) into `out`.
     pub fn write_rgb(self, out: &mut Vec<u8>) {
         out.resize(self.width * self.height * 3, 0);
@@ -71,16 +88,108 @@ impl Yuv420<'_> {
     }
 }
 
-/// One row: `y` luma, `u`/`v` the chroma row (one sample per two pixels), `dst` RGB.
+/// One row to planar R, G and B: the same integers as [`convert_row`], computed rather than
+/// looked up, in a loop over pixel pairs that the compiler vectorizes (no gathers, contiguous
+/// stores): the loader's channel-first layout without an interleaved copy in between.
 #[multiversion::multiversion(targets("x86_64+avx2", "x86_64+ssse3", "aarch64+neon"))]
-fn convert_row(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
-    for (x, px) in dst.chunks_exact_mut(3).enumerate() {
-        let ys = mulhi((i32::from(y[x]) << 3) - 128, Y_COEFF);
-        let u8_ = (i32::from(u[x / 2]) - 128) << 3;
-        let v8 = (i32::from(v[x / 2]) - 128) << 3;
-        px[0] = (ys + mulhi(v8, V2R)).clamp(0, 255) as u8;
-        px[1] = (ys + mulhi(u8_, U2G) + mulhi(v8, V2G)).clamp(0, 255) as u8;
-        px[2] = (ys + mulhi(u8_, U2B)).clamp(0, 255) as u8;
+fn convert_row_planar(y: &[u8], u: &[u8], v: &[u8], r: &mut [u8], g: &mut [u8], b: &mut [u8]) {
+    #[inline(always)]
+    fn one(y: u8, [rv, gv, bv]: [i32; 3]) -> [u8; 3] {
+        let ys = (((i32::from(y) << 3) - 128) * Y_COEFF) >> 16;
+        [
+            (ys + rv).clamp(0, 255) as u8,
+            (ys + gv).clamp(0, 255) as u8,
+            (ys + bv).clamp(0, 255) as u8,
+        ]
+    }
+    #[inline(always)]
+    fn chroma(u: u8, v: u8) -> [i32; 3] {
+        let (u, v) = ((i32::from(u) - 128) << 3, (i32::from(v) - 128) << 3);
+        [
+            (v * V2R) >> 16,
+            ((u * U2G) >> 16) + ((v * V2G) >> 16),
+            (u * U2B) >> 16,
+        ]
+    }
+    let pairs = y
+        .chunks_exact(2)
+        .zip(u.iter().zip(v))
+        .zip(r.chunks_exact_mut(2).zip(g.chunks_exact_mut(2)))
+        .zip(b.chunks_exact_mut(2));
+    for (((ys, (&u, &v)), (rr, gg)), bb) in pairs {
+        let c = chroma(u, v);
+        let [r0, g0, b0] = one(ys[0], c);
+        let [r1, g1, b1] = one(ys[1], c);
+        rr.copy_from_slice(&[r0, r1]);
+        gg.copy_from_slice(&[g0, g1]);
+        bb.copy_from_slice(&[b0, b1]);
+    }
+    if y.len() % 2 == 1 {
+        let x = y.len() - 1;
+        let [rx, gx, bx] = one(y[x], chroma(u[x / 2], v[x / 2]));
+        (r[x], g[x], b[x]) = (rx, gx, bx);
+    }
+}
+
+/// swscale's fixed-point terms, one table per input: each is a function of one 8-bit value
+/// only (`mulhi` of that value's scaled offset), so a pixel is three table sums — the same
+/// integers as computing them, at a fraction of the cost (this was 20–30 % of a video epoch).
+struct Terms {
+    y: [i32; 256],
+    v2r: [i32; 256],
+    u2g: [i32; 256],
+    v2g: [i32; 256],
+    u2b: [i32; 256],
+}
+
+const fn terms() -> Terms {
+    let mut t = Terms {
+        y: [0; 256],
+        v2r: [0; 256],
+        u2g: [0; 256],
+        v2g: [0; 256],
+        u2b: [0; 256],
+    };
+    let mut i = 0;
+    while i < 256 {
+        let c = (i as i32 - 128) << 3;
+        t.y[i] = ((((i as i32) << 3) - 128) * Y_COEFF) >> 16;
+        t.v2r[i] = (c * V2R) >> 16;
+        t.u2g[i] = (c * U2G) >> 16;
+        t.v2g[i] = (c * V2G) >> 16;
+        t.u2b[i] = (c * U2B) >> 16;
+        i += 1;
+    }
+    t
+}
+
+static TERMS: Terms = terms();
+
+/// One pixel from its luma term and its chroma pair's offsets.
+#[inline(always)]
+fn pixel(ys: i32, [r, g, b]: [i32; 3], px: &mut [u8]) {
+    px[0] = (ys + r).clamp(0, 255) as u8;
+    px[1] = (ys + g).clamp(0, 255) as u8;
+    px[2] = (ys + b).clamp(0, 255) as u8;
+}
+
+/// One row: `y` luma, `u`/`v` the chroma row (one sample per two pixels), `dst` RGB.
+pub(crate) fn convert_row(y: &[u8], u: &[u8], v: &[u8], dst: &mut [u8]) {
+    let t = &TERMS;
+    let offsets = |u: u8, v: u8| {
+        let (u, v) = (usize::from(u), usize::from(v));
+        [t.v2r[v], t.u2g[u] + t.v2g[v], t.u2b[u]]
+    };
+    let pairs = y.chunks_exact(2).zip(dst.chunks_exact_mut(6));
+    for ((ys, px), (&u, &v)) in pairs.zip(u.iter().zip(v)) {
+        let off = offsets(u, v);
+        pixel(t.y[usize::from(ys[0])], off, &mut px[..3]);
+        pixel(t.y[usize::from(ys[1])], off, &mut px[3..]);
+    }
+    if y.len() % 2 == 1 {
+        let x = y.len() - 1;
+        let off = offsets(u[x / 2], v[x / 2]);
+        pixel(t.y[usize::from(y[x])], off, &mut dst[3 * x..3 * x + 3]);
     }
 }
 
@@ -151,6 +260,39 @@ fn chroma_row(top: &[u8], bottom: &[u8], u: &mut [u8], v: &mut [u8]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn both_rows_give_swscales_fixed_point_for_every_yuv_triple() {
+        let mulhi = |a: i32, b: i32| (a * b) >> 16;
+        let want = |yv: u8, u: u8, v: u8| {
+            let ys = mulhi((i32::from(yv) << 3) - 128, Y_COEFF);
+            let u8_ = (i32::from(u) - 128) << 3;
+            let v8 = (i32::from(v) - 128) << 3;
+            [
+                (ys + mulhi(v8, V2R)).clamp(0, 255) as u8,
+                (ys + mulhi(u8_, U2G) + mulhi(v8, V2G)).clamp(0, 255) as u8,
+                (ys + mulhi(u8_, U2B)).clamp(0, 255) as u8,
+            ]
+        };
+        // Three pixels: a pair sharing the first chroma sample, then an odd one on its own.
+        let mut px = [0u8; 9];
+        for yv in 0..=255u8 {
+            for u in 0..=255u8 {
+                for v in 0..=255u8 {
+                    let ys = [yv, 255 - yv, yv ^ 0x55];
+                    convert_row(&ys, &[u, v], &[v, u], &mut px);
+                    let (mut r, mut g, mut b) = ([0u8; 3], [0u8; 3], [0u8; 3]);
+                    convert_row_planar(&ys, &[u, v], &[v, u], &mut r, &mut g, &mut b);
+                    for k in 0..3 {
+                        assert_eq!([r[k], g[k], b[k]], px[3 * k..3 * k + 3], "planar {k}");
+                    }
+                    assert_eq!(px[..3], want(ys[0], u, v), "y {yv} u {u} v {v}");
+                    assert_eq!(px[3..6], want(ys[1], u, v), "y {} u {u} v {v}", ys[1]);
+                    assert_eq!(px[6..], want(ys[2], v, u), "y {} u {v} v {u}", ys[2]);
+                }
+            }
+        }
+    }
 
     #[test]
     fn grey_and_primaries_convert_as_bt601_limited_range() {
@@ -278,5 +420,82 @@ mod tests {
             ..planes
         };
         assert!(short.check().is_err());
+    }
+
+    /// Pseudo-random planes of a `w × h` picture with padded strides.
+    fn noise(w: usize, h: usize, seed: u64) -> (Vec<u8>, Vec<u8>, Vec<u8>, usize, usize) {
+        let mut x = seed;
+        let mut next = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 56) as u8
+        };
+        let (ys, cs) = (w + 5, w.div_ceil(2) + 3);
+        let y = (0..ys * h).map(|_| next()).collect();
+        let u = (0..cs * h.div_ceil(2)).map(|_| next()).collect();
+        let v = (0..cs * h.div_ceil(2)).map(|_| next()).collect();
+        (y, u, v, ys, cs)
+    }
+
+    #[test]
+    fn channel_first_output_is_the_interleaved_one_transposed() {
+        for (w, h) in [(1, 1), (3, 3), (7, 4), (64, 48), (321, 241)] {
+            let (y, u, v, y_stride, uv_stride) = noise(w, h, (w * h) as u64);
+            let p = Yuv420 {
+                width: w,
+                height: h,
+                y: &y,
+                u: &u,
+                v: &v,
+                y_stride,
+                uv_stride,
+            };
+            p.check().unwrap();
+            let mut hwc = Vec::new();
+            p.write_rgb(&mut hwc);
+            let mut chw = vec![0u8; 3 * w * h];
+            p.write_chw(&mut chw);
+            for i in 0..w * h {
+                for c in 0..3 {
+                    assert_eq!(
+                        chw[c * w * h + i],
+                        hwc[3 * i + c],
+                        "{w}×{h} pixel {i} channel {c}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// `cargo test --release -p scaledp-codec -- --ignored --nocapture yuv_speed`: ns per pixel
+    /// of the two layouts at 320×240.
+    #[test]
+    #[ignore = "a timing, not a check"]
+    fn yuv_speed() {
+        let (w, h) = (320, 240);
+        let (y, u, v, y_stride, uv_stride) = noise(w, h, 7);
+        let p = Yuv420 {
+            width: w,
+            height: h,
+            y: &y,
+            u: &u,
+            v: &v,
+            y_stride,
+            uv_stride,
+        };
+        let (mut hwc, mut chw) = (Vec::new(), vec![0u8; 3 * w * h]);
+        let n = 500;
+        let t = std::time::Instant::now();
+        for _ in 0..n {
+            p.write_rgb(&mut hwc);
+        }
+        let rgb = t.elapsed().as_secs_f64() * 1e9 / (n * w * h) as f64;
+        let t = std::time::Instant::now();
+        for _ in 0..n {
+            p.write_chw(&mut chw);
+        }
+        let planar = t.elapsed().as_secs_f64() * 1e9 / (n * w * h) as f64;
+        eprintln!("write_rgb {rgb:.2} ns/pixel, write_chw {planar:.2} ns/pixel");
     }
 }

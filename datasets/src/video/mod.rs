@@ -265,19 +265,22 @@ impl Fetched for FetchedVideo {
         SCRATCH.with(|s| {
             let (rgb, resized) = &mut *s.borrow_mut();
             let mut size = (0, 0);
+            // At the feature's size (the usual case) the picture goes straight to the
+            // channel-first output; a picture of another size is resized through RGB first.
             self.decoders
                 .picture(&held, target, &mut |p| {
-                    p.write_rgb(rgb);
                     size = (p.width as u32, p.height as u32);
+                    if size == (width, height) {
+                        p.write_chw(dst);
+                    } else {
+                        p.write_rgb(rgb);
+                    }
                 })
                 .map_err(err)?;
-            let hwc: &[u8] = if size == (width, height) {
-                rgb
-            } else {
+            if size != (width, height) {
                 resize(rgb, size.0, size.1, width, height, resized).map_err(err)?;
-                resized
-            };
-            to_chw(hwc, width as usize, height as usize, dst);
+                to_chw(resized, width as usize, height as usize, dst);
+            }
             Ok(())
         })
     }
