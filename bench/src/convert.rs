@@ -4,13 +4,13 @@
 //! pyarrow) on the same recordings and compares frames/s.
 
 use std::path::{Path, PathBuf};
-use std::process::Command as Process;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use scaledp_schema::Rig;
-use scaledp_testkit::{load_average, measure, Measured, TEST_VENV};
+use scaledp_testkit::{load_average, Measured, TEST_VENV};
 
+use crate::convert_run::scaledp_convert;
 use crate::convert_s3::{self, Route};
 use crate::disk::dir_bytes;
 use crate::python::{run_convert_baseline, ConvertRun, NotRun, Python};
@@ -154,23 +154,7 @@ fn generate(dirs: &Dirs, rig: &Rig, args: &BenchConvertArgs, jobs: usize) -> Res
 /// `scaledp convert` over the recordings, measured as a child process.
 fn convert(dirs: &Dirs, jobs: usize) -> Result<Ours> {
     let exe = std::env::current_exe().context("locating the scaledp executable")?;
-    let mut convert = Process::new(&exe);
-    convert
-        .arg("convert")
-        .arg(&dirs.recordings)
-        .arg("--out")
-        .arg(&dirs.dataset)
-        .arg("--jobs")
-        .arg(jobs.to_string());
-    tracing::info!("running {convert:?}");
-    let m = measure(convert, None).context("running scaledp convert")?;
-    if !m.status.success() {
-        bail!(
-            "scaledp convert exited with {}: {}",
-            m.status,
-            m.stderr.last().map_or("", String::as_str)
-        );
-    }
+    let m = scaledp_convert(&exe, &dirs.recordings, &dirs.dataset, jobs, &[])?;
     let info_path = dirs.dataset.join("meta").join("info.json");
     let info: serde_json::Value = serde_json::from_slice(
         &std::fs::read(&info_path).with_context(|| format!("reading {}", info_path.display()))?,

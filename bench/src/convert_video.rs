@@ -6,12 +6,12 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command as Process;
 
 use anyhow::{bail, Context, Result};
 use scaledp_datasets::LoaderOptions;
-use scaledp_testkit::{measure, Measured};
+use scaledp_testkit::Measured;
 
+use crate::convert_run::scaledp_convert as convert;
 use crate::disk::dir_bytes;
 
 /// JPEG qualities converted beside the videos (q100 is the reference).
@@ -28,36 +28,6 @@ struct Row {
 
 /// Every frame of every camera of `dataset`, keyed by (episode, frame, camera).
 type Pictures = BTreeMap<(i64, i64, usize), Vec<u8>>;
-
-fn convert(
-    exe: &Path,
-    recordings: &Path,
-    out: &Path,
-    jobs: usize,
-    extra: &[&str],
-) -> Result<Measured> {
-    if out.exists() {
-        std::fs::remove_dir_all(out).with_context(|| format!("clearing {}", out.display()))?;
-    }
-    let mut c = Process::new(exe);
-    c.arg("convert")
-        .arg(recordings)
-        .arg("--out")
-        .arg(out)
-        .arg("--jobs")
-        .arg(jobs.to_string())
-        .args(extra);
-    tracing::info!("running {c:?}");
-    let m = measure(c, None).context("running scaledp convert")?;
-    if !m.status.success() {
-        bail!(
-            "scaledp convert {extra:?} exited with {}: {}",
-            m.status,
-            m.stderr.last().map_or("", String::as_str)
-        );
-    }
-    Ok(m)
-}
 
 /// The pictures of `dataset` as our loader returns them (RGB, channel-first per camera).
 fn pictures(dataset: &Path) -> Result<(Pictures, u64)> {

@@ -32,6 +32,7 @@
 
 mod args;
 mod convert;
+mod convert_run;
 mod convert_s3;
 mod convert_video;
 mod disk;

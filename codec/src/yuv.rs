@@ -423,35 +423,50 @@ mod tests {
     }
 
     /// Pseudo-random planes of a `w × h` picture with padded strides.
-    fn noise(w: usize, h: usize, seed: u64) -> (Vec<u8>, Vec<u8>, Vec<u8>, usize, usize) {
-        let mut x = seed;
-        let mut next = || {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 56) as u8
-        };
-        let (ys, cs) = (w + 5, w.div_ceil(2) + 3);
-        let y = (0..ys * h).map(|_| next()).collect();
-        let u = (0..cs * h.div_ceil(2)).map(|_| next()).collect();
-        let v = (0..cs * h.div_ceil(2)).map(|_| next()).collect();
-        (y, u, v, ys, cs)
+    struct Noise {
+        w: usize,
+        h: usize,
+        y: Vec<u8>,
+        u: Vec<u8>,
+        v: Vec<u8>,
+    }
+
+    impl Noise {
+        fn new(w: usize, h: usize, seed: u64) -> Self {
+            let mut x = seed;
+            let mut next = || {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (x >> 56) as u8
+            };
+            let (ys, cs) = (w + 5, w.div_ceil(2) + 3);
+            let y = (0..ys * h).map(|_| next()).collect();
+            let u = (0..cs * h.div_ceil(2)).map(|_| next()).collect();
+            let v = (0..cs * h.div_ceil(2)).map(|_| next()).collect();
+            Self { w, h, y, u, v }
+        }
+
+        fn picture(&self) -> Yuv420<'_> {
+            let p = Yuv420 {
+                width: self.w,
+                height: self.h,
+                y: &self.y,
+                u: &self.u,
+                v: &self.v,
+                y_stride: self.w + 5,
+                uv_stride: self.w.div_ceil(2) + 3,
+            };
+            p.check().unwrap();
+            p
+        }
     }
 
     #[test]
     fn channel_first_output_is_the_interleaved_one_transposed() {
         for (w, h) in [(1, 1), (3, 3), (7, 4), (64, 48), (321, 241)] {
-            let (y, u, v, y_stride, uv_stride) = noise(w, h, (w * h) as u64);
-            let p = Yuv420 {
-                width: w,
-                height: h,
-                y: &y,
-                u: &u,
-                v: &v,
-                y_stride,
-                uv_stride,
-            };
-            p.check().unwrap();
+            let noise = Noise::new(w, h, (w * h) as u64);
+            let p = noise.picture();
             let mut hwc = Vec::new();
             p.write_rgb(&mut hwc);
             let mut chw = vec![0u8; 3 * w * h];
@@ -474,16 +489,8 @@ mod tests {
     #[ignore = "a timing, not a check"]
     fn yuv_speed() {
         let (w, h) = (320, 240);
-        let (y, u, v, y_stride, uv_stride) = noise(w, h, 7);
-        let p = Yuv420 {
-            width: w,
-            height: h,
-            y: &y,
-            u: &u,
-            v: &v,
-            y_stride,
-            uv_stride,
-        };
+        let noise = Noise::new(w, h, 7);
+        let p = noise.picture();
         let (mut hwc, mut chw) = (Vec::new(), vec![0u8; 3 * w * h]);
         let n = 500;
         let t = std::time::Instant::now();
