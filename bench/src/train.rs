@@ -119,8 +119,8 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         c.action_chunk = cfg.action_chunk;
         let l = ddim_latency(&c, 10, args.latency_runs, &Device::Cpu)?;
         println!(
-            "DDIM-10 {size:<3} per action chunk (batch 1, {} runs): p50 {:.1} ms, p99 {:.1} ms",
-            l.runs, l.p50_ms, l.p99_ms
+            "DDIM-10 {size:<3} per action chunk (batch 1, {} runs): p50 {:.1} ms (encoders {:.1} ms), p99 {:.1} ms (goal < 100 ms)",
+            l.runs, l.p50_ms, l.encode_p50_ms, l.p99_ms
         );
     }
     Ok(Outcome::Completed)

@@ -120,6 +120,8 @@ pub struct Latency {
     pub p50_ms: f64,
     /// 99th percentile (ms).
     pub p99_ms: f64,
+    /// Median time of the encoders alone (ms; the rest is the denoiser's passes).
+    pub encode_p50_ms: f64,
 }
 
 /// Times `runs` DDIM samples (after 2 untimed) of a model of `cfg` with random weights.
@@ -138,13 +140,21 @@ pub fn ddim_latency(
     let state = vec![0.1f32; cfg.obs_horizon * cfg.state_dim];
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     let mut times = Vec::with_capacity(runs);
+    let mut encode = Vec::with_capacity(runs);
     let mut engine = crate::engine::Engine::default();
     for i in 0..runs + 2 {
         let t0 = Instant::now();
         if device.is_cpu() {
             engine.sample(&model, &sched, &images, &state, 1, &mut rng)?;
+            if i >= 2 {
+                encode.push(engine.last_encode_s() * 1e3);
+            }
         } else {
+            let t = Instant::now();
             let cond = model.encode(&images, &state, 1, Crop::Center, &mut rng)?;
+            if i >= 2 {
+                encode.push(t.elapsed().as_secs_f64() * 1e3);
+            }
             let x = ddim_sample(&model, &sched, &cond, &mut rng)?;
             x.flatten_all()?.to_vec1::<f32>()?;
         }
@@ -152,12 +162,15 @@ pub fn ddim_latency(
             times.push(t0.elapsed().as_secs_f64() * 1e3);
         }
     }
-    times.sort_by(f64::total_cmp);
-    let at = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    let at = |v: &mut Vec<f64>, q: f64| {
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q).round() as usize]
+    };
     Ok(Latency {
         runs,
-        p50_ms: at(0.5),
-        p99_ms: at(0.99),
+        p50_ms: at(&mut times, 0.5),
+        p99_ms: at(&mut times, 0.99),
+        encode_p50_ms: at(&mut encode, 0.5),
     })
 }
 

@@ -18,8 +18,9 @@ const GN_EPS: f64 = 1e-5;
 struct ConvAt {
     name: String,
     geom: Geom,
-    /// `[C_out, kh, kw, C_in]`.
+    /// `[C_out, kh, kw, C_in]`, or `[kh, kw, C_in, C_out]` when `hwio` (sampling only).
     wp: std::sync::Arc<[f32]>,
+    hwio: bool,
 }
 
 impl ConvAt {
@@ -27,8 +28,13 @@ impl ConvAt {
         let shape = wv.shape(&name)?;
         let padding = shape[2] / 2;
         let geom = Geom::new(&input, &shape, stride, padding)?;
-        let wp = wv.conv_ohwi(&name, &geom)?;
-        Ok(ConvAt { name, geom, wp })
+        let (wp, hwio) = wv.conv_kernel(&name, &geom)?;
+        Ok(ConvAt {
+            name,
+            geom,
+            wp,
+            hwio,
+        })
     }
     fn out_dims(&self) -> [usize; 4] {
         let g = &self.geom;
@@ -39,7 +45,7 @@ impl ConvAt {
     }
     fn forward(&self, x: &[f32], y: &mut Vec<f32>) {
         y.resize(self.out_len(), 0.0);
-        conv::forward(&self.geom, x, &self.wp, y);
+        conv::forward(&self.geom, x, &self.wp, self.hwio, y);
     }
     /// Adds dW to `grads`; `dx` gets the input gradient when given (`acc`: added to it).
     fn backward(
@@ -49,6 +55,7 @@ impl ConvAt {
         dy: &[f32],
         dx: Option<(&mut Vec<f32>, bool)>,
     ) {
+        debug_assert!(!self.hwio, "sampling kernels have no backward");
         let g = &self.geom;
         let mut dwp = vec![0f32; g.c_out * g.k()];
         conv::grad_weight(g, x, dy, &mut dwp);

@@ -35,12 +35,12 @@ pub(crate) struct WeightView<'a> {
 /// `[in, out]` copies of a model's 2-D weights (Linear layers), made once for a model whose
 /// weights no longer change (a loaded policy): see [`ops::LinearWeight`]. Remembers which
 /// tensors it copied, so a different model is noticed.
-/// The convolutions' kernels are kept reordered `[C_out, kh, kw, C_in]` the same way.
+/// The convolutions' kernels are kept reordered `[kh, kw, C_in, C_out]` the same way.
 #[derive(Default)]
 pub(crate) struct InOut {
     of: Vec<candle_core::TensorId>,
     map: HashMap<String, Vec<f32>>,
-    ohwi: HashMap<String, Arc<[f32]>>,
+    hwio: HashMap<String, Arc<[f32]>>,
 }
 
 impl InOut {
@@ -53,14 +53,15 @@ impl InOut {
     /// `[in, out]` copies of every 2-D weight named `*.weight` among `weights`.
     pub fn of(weights: &[(String, Tensor)]) -> Result<Self> {
         let view = WeightView::new(weights);
-        let (mut map, mut ohwi) = (HashMap::new(), HashMap::new());
+        let (mut map, mut hwio) = (HashMap::new(), HashMap::new());
         for (name, t) in weights {
             if !name.ends_with(".weight") {
                 continue;
             }
-            if let &[_, ci, kh, kw] = t.dims() {
-                let k = crate::model::conv::kernel_to_ohwi(ci, kh * kw, view.get(name)?);
-                ohwi.insert(name.clone(), Arc::from(k));
+            if let &[co, ci, kh, kw] = t.dims() {
+                use crate::model::conv::{kernel_to_ohwi, ohwi_to_hwio};
+                let k = kernel_to_ohwi(ci, kh * kw, view.get(name)?);
+                hwio.insert(name.clone(), Arc::from(ohwi_to_hwio(co, ci * kh * kw, &k)));
                 continue;
             }
             let &[out, inp] = t.dims() else { continue };
@@ -76,7 +77,7 @@ impl InOut {
         Ok(InOut {
             of: weights.iter().map(|(_, t)| t.id()).collect(),
             map,
-            ohwi,
+            hwio,
         })
     }
 }
@@ -99,11 +100,19 @@ impl<'a> WeightView<'a> {
         self
     }
 
-    /// Convolution kernel `name` (of geometry `g`) reordered `[C_out, kh, kw, C_in]`.
-    pub fn conv_ohwi(&self, name: &str, g: &crate::model::conv::Geom) -> Result<Arc<[f32]>> {
-        match self.in_out.and_then(|c| c.ohwi.get(name)) {
-            Some(k) => Ok(k.clone()),
-            None => Ok(crate::model::conv::oihw_to_ohwi(g, self.get(name)?).into()),
+    /// Convolution kernel `name` (of geometry `g`) reordered `[C_out, kh, kw, C_in]`, or its
+    /// `[kh, kw, C_in, C_out]` copy when the view has one (`.1` is then true).
+    pub fn conv_kernel(
+        &self,
+        name: &str,
+        g: &crate::model::conv::Geom,
+    ) -> Result<(Arc<[f32]>, bool)> {
+        match self.in_out.and_then(|c| c.hwio.get(name)) {
+            Some(k) => Ok((k.clone(), true)),
+            None => Ok((
+                crate::model::conv::oihw_to_ohwi(g, self.get(name)?).into(),
+                false,
+            )),
         }
     }
 

@@ -11,6 +11,7 @@ use scaledp_datasets::Batch;
 use super::{denoiser, encoder, Grads, InOut, WeightView};
 use crate::config::{Attention, ModelConfig};
 use crate::error::{Error, Result};
+use crate::model::cpu::on_pool;
 use crate::model::encoder::crop_values;
 use crate::model::params::randn;
 use crate::model::{Crop, ScaleDp};
@@ -26,6 +27,8 @@ pub(crate) struct Engine {
     cond: Vec<f32>,
     /// `[in, out]` copies of the Linear weights of the model [`Engine::sample`] last sampled.
     in_out: std::sync::Arc<InOut>,
+    /// How long the last [`Engine::sample`] spent in the encoders (s).
+    encode_s: f64,
 }
 
 impl std::fmt::Debug for Engine {
@@ -51,6 +54,11 @@ fn shape(c: &ModelConfig) -> denoiser::Shape {
 }
 
 impl Engine {
+    /// How long the last [`Engine::sample`] spent in the encoders (s).
+    pub fn last_encode_s(&self) -> f64 {
+        self.encode_s
+    }
+
     /// The condition of `b` samples (`images` `[b, To, cams, 3, H, W]`, `state` normalized
     /// `[b, To, S]`), crops drawn from `rng` as [`ScaleDp::encode`] draws them; the encoders'
     /// activations are kept for [`Engine::encode_backward`].
@@ -129,6 +137,21 @@ impl Engine {
     /// computes them with candle (same draws, same order, same micro-batches).
     #[allow(clippy::too_many_arguments)]
     pub fn loss_and_grads(
+        &mut self,
+        model: &ScaleDp,
+        scheduler: &NoiseScheduler,
+        batch: &Batch,
+        spec: LossSpec,
+        micro: Option<usize>,
+        rng: &mut ChaCha8Rng,
+        phases: &mut Phases,
+    ) -> Result<(f32, Grads)> {
+        on_pool(|| self.loss_and_grads_here(model, scheduler, batch, spec, micro, rng, phases))
+    }
+
+    /// [`Engine::loss_and_grads`] on the calling thread.
+    #[allow(clippy::too_many_arguments)]
+    fn loss_and_grads_here(
         &mut self,
         model: &ScaleDp,
         scheduler: &NoiseScheduler,
@@ -236,6 +259,19 @@ impl Engine {
         b: usize,
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<f32>> {
+        on_pool(|| self.sample_here(model, scheduler, images, state, b, rng))
+    }
+
+    /// [`Engine::sample`] on the calling thread.
+    fn sample_here(
+        &mut self,
+        model: &ScaleDp,
+        scheduler: &NoiseScheduler,
+        images: &[u8],
+        state: &[f32],
+        b: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Vec<f32>> {
         let c = model.config().clone();
         let sh = shape(&c);
         let weights = model.weights();
@@ -245,23 +281,25 @@ impl Engine {
         // A handle of its own, so the view does not borrow the engine the passes write into.
         let in_out = self.in_out.clone();
         let wv = WeightView::new(weights).with_in_out(&in_out);
+        let t0 = Instant::now();
         self.encode(model, &wv, images, state, b, Crop::Center, rng)?;
+        self.encode_s = t0.elapsed().as_secs_f64();
         let n = c.action_chunk * c.action_dim;
         let mut x = randn(rng, b * n);
-        let cond = std::mem::take(&mut self.cond);
-        for &t in scheduler.timesteps() {
-            denoiser::forward(
-                &sh,
-                &wv,
-                &x,
-                &vec![t as f32; b],
-                &cond,
-                1,
-                &mut self.denoiser,
-            )?;
+        // Everything that depends on (t, observation) and not on x — the embeddings and every
+        // adaLN modulation — for all the steps at once: one product per layer over
+        // `b · steps` rows instead of a matrix-vector product per layer and step.
+        let ts = scheduler.timesteps();
+        let steps = ts.len();
+        let t_all: Vec<f32> = (0..b).flat_map(|_| ts.iter().map(|&t| t as f32)).collect();
+        denoiser::condition(&sh, &wv, &t_all, &self.cond, steps, &mut self.denoiser)?;
+        let all = self.denoiser.take_modulation();
+        for (j, &t) in ts.iter().enumerate() {
+            let rows: Vec<usize> = (0..b).map(|i| i * steps + j).collect();
+            self.denoiser.set_modulation(&all, &rows);
+            denoiser::trunk(&sh, &wv, &x, &mut self.denoiser)?;
             scheduler.step_values(&self.denoiser.out, t, &mut x)?;
         }
-        self.cond = cond;
         Ok(x)
     }
 }

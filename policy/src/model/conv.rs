@@ -119,6 +119,19 @@ pub(crate) fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
 }
 
 /// [`oihw_to_ohwi`] of a kernel with `ci` input channels and `kk` taps.
+/// A `[C_out, kh, kw, C_in]` kernel (`k` = kh·kw·C_in values per output channel) transposed
+/// to `[kh, kw, C_in, C_out]`: the layout a forward pass with few output pixels multiplies in
+/// place (the GEMM repacks the other one on every call).
+pub(crate) fn ohwi_to_hwio(co: usize, k: usize, w: &[f32]) -> Vec<f32> {
+    let mut out = vec![0f32; w.len()];
+    for (o, row) in w.chunks_exact(k).take(co).enumerate() {
+        for (i, v) in row.iter().enumerate() {
+            out[i * co + o] = *v;
+        }
+    }
+    out
+}
+
 pub(crate) fn kernel_to_ohwi(ci: usize, kk: usize, w: &[f32]) -> Vec<f32> {
     let mut out = vec![0f32; w.len()];
     for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
@@ -200,12 +213,12 @@ fn col2im(g: &Geom, cols: &[f32], dx: &mut [f32]) {
         });
 }
 
-/// `out` `[B, H', W', C_out]` = the convolution of `x` (NHWC) with `wp` (`[C_out, kh, kw,
-/// C_in]`, see [`oihw_to_ohwi`]).
-pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], out: &mut [f32]) {
+/// `out` `[B, H', W', C_out]` = the convolution of `x` (NHWC) with `wp`: `[C_out, kh, kw, C_in]`
+/// (see [`oihw_to_ohwi`]), or `[kh, kw, C_in, C_out]` when `hwio` (see [`ohwi_to_hwio`]).
+pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f32]) {
     let (p, k, co) = (g.pixels(), g.k(), g.c_out);
     if g.pointwise() {
-        gemm(g.b * p, co, k, x, false, wp, true, out, false);
+        gemm(g.b * p, co, k, x, false, wp, !hwio, out, false);
         return;
     }
     let step = g.chunk();
@@ -214,7 +227,7 @@ pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], out: &mut [f32]) {
             let n = step.min(g.b - s0);
             im2col(g, &x[s0 * g.per_in()..(s0 + n) * g.per_in()], n, cols);
             let dst = &mut out[s0 * p * co..(s0 + n) * p * co];
-            gemm(n * p, co, k, cols, false, wp, true, dst, false);
+            gemm(n * p, co, k, cols, false, wp, !hwio, dst, false);
         }
     });
 }
@@ -280,7 +293,7 @@ impl CustomOp2 for Conv {
         let (x, w) = (values(s1, l1)?, values(s2, l2)?);
         let wp = oihw_to_ohwi(&g, w);
         let mut out = vec![0f32; g.b * g.pixels() * g.c_out];
-        forward(&g, x, &wp, &mut out);
+        forward(&g, x, &wp, false, &mut out);
         let shape = Shape::from((g.b, g.out_h(), g.out_w(), g.c_out));
         Ok((CpuStorage::F32(out), shape))
     }
