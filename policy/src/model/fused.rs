@@ -336,44 +336,65 @@ pub(crate) fn pooled(side: usize) -> usize {
     (side - 1) / 2 + 1
 }
 
+/// Whether `v` replaces `best` as a window's maximum: larger, or a NaN (which propagates,
+/// as in PyTorch); ties keep the first in row-major order. Branch-free, so the loops over
+/// channels below vectorize.
+#[inline]
+fn replaces(v: f32, best: f32) -> bool {
+    (v > best) | (v.is_nan() & !best.is_nan())
+}
+
+/// Calls `f(oy, ox, window)` for each output position of a 3×3 / stride 2 / padding 1 pool
+/// over `h × w`, `window` being the row-major flat positions `y · w + x` it covers.
+fn windows(h: usize, w: usize, mut f: impl FnMut(usize, usize, &mut dyn Iterator<Item = usize>)) {
+    for oy in 0..pooled(h) {
+        for ox in 0..pooled(w) {
+            let ys = (2 * oy).saturating_sub(1)..(2 * oy + 2).min(h);
+            let xs = (2 * ox).saturating_sub(1)..(2 * ox + 2).min(w);
+            let mut it = ys.flat_map(|y| xs.clone().map(move |x| y * w + x));
+            f(oy, ox, &mut it);
+        }
+    }
+}
+
 /// For each output value of one sample (`x` `[H, W, C]`), the flat index (in the sample) of
 /// the input it takes: the first maximum of its window in row-major order, as PyTorch; a NaN
 /// propagates.
 fn argmax(x: &[f32], h: usize, w: usize, c: usize) -> Vec<u32> {
-    let (oh, ow) = (pooled(h), pooled(w));
-    let mut idx = vec![u32::MAX; oh * ow * c];
+    let ow = pooled(w);
+    let mut idx = vec![0u32; pooled(h) * ow * c];
     let mut best = vec![f32::NEG_INFINITY; c];
-    for oy in 0..oh {
-        for ox in 0..ow {
-            let at = &mut idx[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
-            for y in (2 * oy).saturating_sub(1)..(2 * oy + 2).min(h) {
-                for xx in (2 * ox).saturating_sub(1)..(2 * ox + 2).min(w) {
-                    let base = (y * w + xx) * c;
-                    let v = &x[base..base + c];
-                    for ch in 0..c {
-                        let (b, vi) = (best[ch], v[ch]);
-                        if at[ch] == u32::MAX || vi > b || (vi.is_nan() && !b.is_nan()) {
-                            best[ch] = vi;
-                            at[ch] = (base + ch) as u32;
-                        }
-                    }
-                }
+    windows(h, w, |oy, ox, window| {
+        let at = &mut idx[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
+        for (i, pos) in window.enumerate() {
+            let base = pos * c;
+            let v = &x[base..base + c];
+            for (ch, ((b, a), &vi)) in best.iter_mut().zip(at.iter_mut()).zip(v).enumerate() {
+                let take = (i == 0) | replaces(vi, *b);
+                *b = if take { vi } else { *b };
+                *a = if take { (base + ch) as u32 } else { *a };
             }
         }
-    }
+    });
     idx
 }
 
 /// The 3×3 / stride 2 / padding 1 max-pool of channels-last samples of `(h, w, c)`, in
-/// parallel over samples.
+/// parallel over samples: each output is the value [`argmax`] picks, found without the index.
 pub(crate) fn max_pool_forward((h, w, c): (usize, usize, usize), x: &[f32], y: &mut [f32]) {
     let (oh, ow) = (pooled(h), pooled(w));
     y.par_chunks_mut(oh * ow * c)
         .zip(x.par_chunks(h * w * c))
         .for_each(|(y, x)| {
-            for (y, &k) in y.iter_mut().zip(&argmax(x, h, w, c)) {
-                *y = x[k as usize];
-            }
+            windows(h, w, |oy, ox, window| {
+                let out = &mut y[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
+                for (i, pos) in window.enumerate() {
+                    let v = &x[pos * c..(pos + 1) * c];
+                    for (o, &vi) in out.iter_mut().zip(v) {
+                        *o = if (i == 0) | replaces(vi, *o) { vi } else { *o };
+                    }
+                }
+            });
         });
 }
 
@@ -529,104 +550,5 @@ impl CustomOp2 for ReluGrad {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use candle_core::{Device, Var};
-
-    fn max_diff(a: &Tensor, b: &Tensor) -> f32 {
-        (a - b)
-            .and_then(|d| d.abs())
-            .and_then(|d| d.max_all())
-            .and_then(|d| d.to_scalar::<f32>())
-            .unwrap_or(f32::INFINITY)
-    }
-
-    /// The fused op and its gradients against the composed one (which candle differentiates)
-    /// on the NCHW view of the same values.
-    #[test]
-    fn fused_group_norm_matches_the_composed_one() -> candle_core::Result<()> {
-        let dev = Device::Cpu;
-        for relu in [false, true] {
-            let x = Var::from_tensor(&(Tensor::randn(0f32, 1., (3, 5, 4, 8), &dev)? * 3.0)?)?;
-            let g = Var::from_tensor(&Tensor::randn(1f32, 0.5, 8, &dev)?)?;
-            let b = Var::from_tensor(&Tensor::randn(0f32, 0.5, 8, &dev)?)?;
-            let ours = group_norm_nhwc(x.as_tensor(), g.as_tensor(), b.as_tensor(), 2, 1e-5, relu)?;
-            let theirs = group_norm_nchw(
-                &x.as_tensor().permute((0, 3, 1, 2))?,
-                g.as_tensor(),
-                b.as_tensor(),
-                2,
-                1e-5,
-                relu,
-            )?
-            .permute((0, 2, 3, 1))?;
-            assert!(max_diff(&ours, &theirs) < 1e-5);
-            let m = Tensor::randn(0f32, 1., (3, 5, 4, 8), &dev)?;
-            let g1 = (ours * &m)?.sum_all()?.backward()?;
-            let g2 = (theirs * &m)?.sum_all()?.backward()?;
-            for v in [&x, &g, &b] {
-                let (Some(a), Some(e)) = (g1.get(v.as_tensor()), g2.get(v.as_tensor())) else {
-                    panic!("no gradient");
-                };
-                assert!(max_diff(a, e) < 1e-4, "relu {relu}: {}", max_diff(a, e));
-            }
-        }
-        Ok(())
-    }
-
-    #[test]
-    fn max_pool_matches_pytorchs_padding_and_routes_gradients_to_the_max() -> candle_core::Result<()>
-    {
-        let dev = Device::Cpu;
-        // Two channels: c0 = 0..35, c1 = its negation (a different maximum per window).
-        let plane = Tensor::arange(0f32, 35., &dev)?.reshape((1, 5, 7, 1))?;
-        let x = Tensor::cat(&[&plane, &plane.neg()?], 3)?;
-        let y = max_pool_3x3_s2_nhwc(&x)?;
-        assert_eq!(y.dims(), &[1, 3, 4, 2]);
-        // Window of output (0, 0) covers rows 0..2, cols 0..2: max is x[1][1] = 8.
-        let v = y.narrow(3, 0, 1)?.flatten_all()?.to_vec1::<f32>()?;
-        assert_eq!(
-            v,
-            vec![8., 10., 12., 13., 22., 24., 26., 27., 29., 31., 33., 34.]
-        );
-        // Of the negated plane, the window's first (top-left) value.
-        let v = y.narrow(3, 1, 1)?.flatten_all()?.to_vec1::<f32>()?;
-        assert_eq!(
-            v,
-            vec![-0., -1., -3., -5., -7., -8., -10., -12., -21., -22., -24., -26.]
-        );
-        let xv = Var::from_tensor(&x)?;
-        let g = max_pool_3x3_s2_nhwc(xv.as_tensor())?
-            .sum_all()?
-            .backward()?;
-        let dx = g.get(xv.as_tensor()).map(|t| t.flatten_all()).transpose()?;
-        let dx = dx
-            .map(|t| t.to_vec1::<f32>())
-            .transpose()?
-            .unwrap_or_default();
-        assert_eq!(dx.iter().sum::<f32>(), 24.0);
-        // x[1][1] of channel 0 is flat index (1·7 + 1)·2.
-        assert_eq!(dx[16], 1.0);
-        Ok(())
-    }
-
-    #[test]
-    fn add_relu_and_its_gradient_match_candles() -> candle_core::Result<()> {
-        let dev = Device::Cpu;
-        let a = Var::from_tensor(&Tensor::randn(0f32, 1., (4, 3, 5), &dev)?)?;
-        let b = Var::from_tensor(&Tensor::randn(0f32, 1., (4, 3, 5), &dev)?)?;
-        let ours = add_relu(a.as_tensor(), b.as_tensor())?;
-        let theirs = (a.as_tensor() + b.as_tensor())?.relu()?;
-        assert!(max_diff(&ours, &theirs) == 0.0);
-        let m = Tensor::randn(0f32, 1., (4, 3, 5), &dev)?;
-        let g1 = (ours * &m)?.sum_all()?.backward()?;
-        let g2 = (theirs * &m)?.sum_all()?.backward()?;
-        for v in [&a, &b] {
-            let (Some(x), Some(y)) = (g1.get(v.as_tensor()), g2.get(v.as_tensor())) else {
-                panic!("no gradient");
-            };
-            assert!(max_diff(x, y) < 1e-6);
-        }
-        Ok(())
-    }
-}
+#[path = "fused_tests.rs"]
+mod tests;
