@@ -104,6 +104,14 @@ impl Geom {
     fn pointwise(&self) -> bool {
         self.kh == 1 && self.kw == 1 && self.stride == 1 && self.padding == 0
     }
+    /// Where (in one NHWC sample) the kw taps of kernel row `i` at output (oy, ox) start, when
+    /// all of them are inside the input: they are then kw·C_in consecutive values.
+    #[inline]
+    fn row_run(&self, oy: usize, ox: usize, i: usize) -> Option<usize> {
+        let y = (oy * self.stride + i).checked_sub(self.padding)?;
+        let x = (ox * self.stride).checked_sub(self.padding)?;
+        (y < self.h && x + self.kw <= self.w).then_some((y * self.w + x) * self.c_in)
+    }
     /// The input row and column of kernel tap (i, j) at output (oy, ox), if inside.
     #[inline]
     fn tap(&self, oy: usize, ox: usize, i: usize, j: usize) -> Option<(usize, usize)> {
@@ -172,8 +180,15 @@ fn im2col(g: &Geom, x: &[f32], n: usize, cols: &mut [f32]) {
             for ox in 0..ow {
                 let d = &mut dst[ox * k..(ox + 1) * k];
                 for i in 0..g.kh {
+                    let run = &mut d[i * g.kw * ci..(i + 1) * g.kw * ci];
+                    // The kw taps of a kernel row are kw neighbouring pixels of one input row:
+                    // one copy of kw·C_in values when all are inside.
+                    if let Some(at) = g.row_run(oy, ox, i) {
+                        run.copy_from_slice(&xs[at..at + g.kw * ci]);
+                        continue;
+                    }
                     for j in 0..g.kw {
-                        let t = &mut d[(i * g.kw + j) * ci..(i * g.kw + j + 1) * ci];
+                        let t = &mut run[j * ci..(j + 1) * ci];
                         match g.tap(oy, ox, i, j) {
                             Some((y, xx)) => {
                                 let at = (y * g.w + xx) * ci;
@@ -198,6 +213,13 @@ fn col2im(g: &Geom, cols: &[f32], dx: &mut [f32]) {
                 for ox in 0..ow {
                     let src = &cs[(oy * ow + ox) * k..(oy * ow + ox + 1) * k];
                     for i in 0..g.kh {
+                        if let Some(at) = g.row_run(oy, ox, i) {
+                            let run = &src[i * g.kw * ci..(i + 1) * g.kw * ci];
+                            for (d, v) in xs[at..at + g.kw * ci].iter_mut().zip(run) {
+                                *d += v;
+                            }
+                            continue;
+                        }
                         for j in 0..g.kw {
                             if let Some((y, xx)) = g.tap(oy, ox, i, j) {
                                 let at = (y * g.w + xx) * ci;

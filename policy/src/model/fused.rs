@@ -344,15 +344,19 @@ fn replaces(v: f32, best: f32) -> bool {
     (v > best) | (v.is_nan() & !best.is_nan())
 }
 
-/// Calls `f(oy, ox, window)` for each output position of a 3×3 / stride 2 / padding 1 pool
-/// over `h × w`, `window` being the row-major flat positions `y · w + x` it covers.
-fn windows(h: usize, w: usize, mut f: impl FnMut(usize, usize, &mut dyn Iterator<Item = usize>)) {
+/// Calls `f(oy, ox, pos)` for each output position of a 3×3 / stride 2 / padding 1 pool over
+/// `h × w` and each input position `pos = y · w + x` of its window, in row-major order.
+#[inline]
+fn windows(h: usize, w: usize, mut f: impl FnMut(usize, usize, usize, bool)) {
     for oy in 0..pooled(h) {
         for ox in 0..pooled(w) {
-            let ys = (2 * oy).saturating_sub(1)..(2 * oy + 2).min(h);
-            let xs = (2 * ox).saturating_sub(1)..(2 * ox + 2).min(w);
-            let mut it = ys.flat_map(|y| xs.clone().map(move |x| y * w + x));
-            f(oy, ox, &mut it);
+            let mut first = true;
+            for y in (2 * oy).saturating_sub(1)..(2 * oy + 2).min(h) {
+                for x in (2 * ox).saturating_sub(1)..(2 * ox + 2).min(w) {
+                    f(oy, ox, y * w + x, first);
+                    first = false;
+                }
+            }
         }
     }
 }
@@ -364,16 +368,14 @@ fn argmax(x: &[f32], h: usize, w: usize, c: usize) -> Vec<u32> {
     let ow = pooled(w);
     let mut idx = vec![0u32; pooled(h) * ow * c];
     let mut best = vec![f32::NEG_INFINITY; c];
-    windows(h, w, |oy, ox, window| {
+    windows(h, w, |oy, ox, pos, first| {
         let at = &mut idx[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
-        for (i, pos) in window.enumerate() {
-            let base = pos * c;
-            let v = &x[base..base + c];
-            for (ch, ((b, a), &vi)) in best.iter_mut().zip(at.iter_mut()).zip(v).enumerate() {
-                let take = (i == 0) | replaces(vi, *b);
-                *b = if take { vi } else { *b };
-                *a = if take { (base + ch) as u32 } else { *a };
-            }
+        let base = pos * c;
+        let v = &x[base..base + c];
+        for (ch, ((b, a), &vi)) in best.iter_mut().zip(at.iter_mut()).zip(v).enumerate() {
+            let take = first | replaces(vi, *b);
+            *b = if take { vi } else { *b };
+            *a = if take { (base + ch) as u32 } else { *a };
         }
     });
     idx
@@ -386,13 +388,11 @@ pub(crate) fn max_pool_forward((h, w, c): (usize, usize, usize), x: &[f32], y: &
     y.par_chunks_mut(oh * ow * c)
         .zip(x.par_chunks(h * w * c))
         .for_each(|(y, x)| {
-            windows(h, w, |oy, ox, window| {
+            windows(h, w, |oy, ox, pos, first| {
                 let out = &mut y[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
-                for (i, pos) in window.enumerate() {
-                    let v = &x[pos * c..(pos + 1) * c];
-                    for (o, &vi) in out.iter_mut().zip(v) {
-                        *o = if (i == 0) | replaces(vi, *o) { vi } else { *o };
-                    }
+                let v = &x[pos * c..(pos + 1) * c];
+                for (o, &vi) in out.iter_mut().zip(v) {
+                    *o = if first | replaces(vi, *o) { vi } else { *o };
                 }
             });
         });
