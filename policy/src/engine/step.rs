@@ -146,103 +146,86 @@ impl Engine {
         rng: &mut ChaCha8Rng,
         phases: &mut Phases,
     ) -> Result<(f32, Grads)> {
-        on_pool(|| self.loss_and_grads_here(model, scheduler, batch, spec, micro, rng, phases))
-    }
-
-    /// [`Engine::loss_and_grads`] on the calling thread.
-    #[allow(clippy::too_many_arguments)]
-    fn loss_and_grads_here(
-        &mut self,
-        model: &ScaleDp,
-        scheduler: &NoiseScheduler,
-        batch: &Batch,
-        spec: LossSpec,
-        micro: Option<usize>,
-        rng: &mut ChaCha8Rng,
-        phases: &mut Phases,
-    ) -> Result<(f32, Grads)> {
-        let c = model.config().clone();
-        let sh = shape(&c);
-        let (b, a, ch, to, s) = (
-            batch.len,
-            c.action_dim,
-            c.action_chunk,
-            c.obs_horizon,
-            c.state_dim,
-        );
-        let k = spec.noise_samples.max(1);
-        let steps = if spec.mask_padding {
-            batch.action_is_pad.iter().filter(|p| !**p).count()
-        } else {
-            batch.action_is_pad.len()
-        };
-        let denom = (steps.max(1) * a * k) as f64;
-        let per_img = to * c.cameras.len() * 3 * c.image_width as usize * c.image_height as usize;
-        let step = micro.unwrap_or(b).clamp(1, b.max(1));
-        let weights = model.weights();
-        let wv = WeightView::new(weights);
-        let mut grads = Grads::default();
-        let mut total = 0f64;
-        for s0 in (0..b).step_by(step) {
-            let n = step.min(b - s0);
-            let t0 = Instant::now();
-            let images = &batch.images[s0 * per_img..(s0 + n) * per_img];
-            let state = &batch.state[s0 * to * s..(s0 + n) * to * s];
-            self.encode(model, &wv, images, state, n, Crop::Random, rng)?;
-            let t1 = Instant::now();
-            let m = n * k;
-            let t: Vec<usize> = (0..m)
-                .map(|_| rng.random_range(0..scheduler.train_steps()))
-                .collect();
-            let noise = randn(rng, m * ch * a);
-            let alphas = scheduler.alphas_cumprod();
-            let x0 = &batch.action[s0 * ch * a..(s0 + n) * ch * a];
-            let mut noisy = vec![0f32; m * ch * a];
-            for (j, (dst, nz)) in noisy
-                .chunks_exact_mut(ch * a)
-                .zip(noise.chunks_exact(ch * a))
-                .enumerate()
-            {
-                let al = alphas[t[j]];
-                let (sa, sb) = (al.sqrt(), (1.0 - al).sqrt());
-                let src = &x0[(j / k) * ch * a..(j / k + 1) * ch * a];
-                for ((o, x), e) in dst.iter_mut().zip(src).zip(nz) {
-                    *o = x * sa + e * sb;
+        on_pool(|| {
+            let c = model.config().clone();
+            let sh = shape(&c);
+            let (b, a, ch, to, s) = (
+                batch.len,
+                c.action_dim,
+                c.action_chunk,
+                c.obs_horizon,
+                c.state_dim,
+            );
+            let k = spec.noise_samples.max(1);
+            let denom = spec.denominator(batch, a);
+            let per_img =
+                to * c.cameras.len() * 3 * c.image_width as usize * c.image_height as usize;
+            let step = micro.unwrap_or(b).clamp(1, b.max(1));
+            let weights = model.weights();
+            let wv = WeightView::new(weights);
+            let mut grads = Grads::default();
+            let mut total = 0f64;
+            for s0 in (0..b).step_by(step) {
+                let n = step.min(b - s0);
+                let t0 = Instant::now();
+                let images = &batch.images[s0 * per_img..(s0 + n) * per_img];
+                let state = &batch.state[s0 * to * s..(s0 + n) * to * s];
+                self.encode(model, &wv, images, state, n, Crop::Random, rng)?;
+                let t1 = Instant::now();
+                let m = n * k;
+                let t: Vec<usize> = (0..m)
+                    .map(|_| rng.random_range(0..scheduler.train_steps()))
+                    .collect();
+                let noise = randn(rng, m * ch * a);
+                let alphas = scheduler.alphas_cumprod();
+                let x0 = &batch.action[s0 * ch * a..(s0 + n) * ch * a];
+                let mut noisy = vec![0f32; m * ch * a];
+                for (j, (dst, nz)) in noisy
+                    .chunks_exact_mut(ch * a)
+                    .zip(noise.chunks_exact(ch * a))
+                    .enumerate()
+                {
+                    let al = alphas[t[j]];
+                    let (sa, sb) = (al.sqrt(), (1.0 - al).sqrt());
+                    let src = &x0[(j / k) * ch * a..(j / k + 1) * ch * a];
+                    for ((o, x), e) in dst.iter_mut().zip(src).zip(nz) {
+                        *o = x * sa + e * sb;
+                    }
                 }
-            }
-            let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
-            denoiser::forward(&sh, &wv, &noisy, &tf, &self.cond, k, &mut self.denoiser)?;
-            // loss = Σ w (ε̂ − ε)² / denom; ∂loss/∂ε̂ = 2 w (ε̂ − ε) / denom.
-            let out = &self.denoiser.out;
-            let mut dout = vec![0f32; out.len()];
-            let mut sum = 0f64;
-            for (j, ((d, o), e)) in dout.iter_mut().zip(out).zip(&noise).enumerate() {
-                let row = j / a;
-                let (sample, tick) = (row / ch / k, row % ch);
-                if spec.mask_padding && batch.action_is_pad[(s0 + sample) * ch + tick] {
-                    continue;
+                let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
+                denoiser::forward(&sh, &wv, &noisy, &tf, &self.cond, k, &mut self.denoiser)?;
+                // loss = Σ w (ε̂ − ε)² / denom; ∂loss/∂ε̂ = 2 w (ε̂ − ε) / denom.
+                let out = &self.denoiser.out;
+                let mut dout = vec![0f32; out.len()];
+                let mut sum = 0f64;
+                for (j, ((d, o), e)) in dout.iter_mut().zip(out).zip(&noise).enumerate() {
+                    let row = j / a;
+                    let (sample, tick) = (row / ch / k, row % ch);
+                    if spec.mask_padding && batch.action_is_pad[(s0 + sample) * ch + tick] {
+                        continue;
+                    }
+                    let diff = o - e;
+                    sum += f64::from(diff * diff);
+                    *d = (2.0 * f64::from(diff) / denom) as f32;
                 }
-                let diff = o - e;
-                sum += f64::from(diff * diff);
-                *d = (2.0 * f64::from(diff) / denom) as f32;
+                total += sum / denom;
+                let t2 = Instant::now();
+                phases.encode_s += (t1 - t0).as_secs_f64();
+                phases.denoise_s += (t2 - t1).as_secs_f64();
+                let dcond = denoiser::backward(
+                    &sh,
+                    &wv,
+                    &self.cond,
+                    k,
+                    &dout,
+                    &mut self.denoiser,
+                    &mut grads,
+                )?;
+                self.encode_backward(model, &wv, &dcond, &mut grads)?;
+                phases.backward_s += t2.elapsed().as_secs_f64();
             }
-            total += sum / denom;
-            let t2 = Instant::now();
-            phases.encode_s += (t1 - t0).as_secs_f64();
-            phases.denoise_s += (t2 - t1).as_secs_f64();
-            let dcond = denoiser::backward(
-                &sh,
-                &wv,
-                &self.cond,
-                k,
-                &dout,
-                &mut self.denoiser,
-                &mut grads,
-            )?;
-            self.encode_backward(model, &wv, &dcond, &mut grads)?;
-            phases.backward_s += t2.elapsed().as_secs_f64();
-        }
-        Ok((total as f32, grads))
+            Ok((total as f32, grads))
+        })
     }
 
     /// Normalized action chunks `[b, C, A]` by DDIM for `b` observations laid out as a batch,
@@ -259,47 +242,36 @@ impl Engine {
         b: usize,
         rng: &mut ChaCha8Rng,
     ) -> Result<Vec<f32>> {
-        on_pool(|| self.sample_here(model, scheduler, images, state, b, rng))
-    }
-
-    /// [`Engine::sample`] on the calling thread.
-    fn sample_here(
-        &mut self,
-        model: &ScaleDp,
-        scheduler: &NoiseScheduler,
-        images: &[u8],
-        state: &[f32],
-        b: usize,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<Vec<f32>> {
-        let c = model.config().clone();
-        let sh = shape(&c);
-        let weights = model.weights();
-        if !self.in_out.is_of(weights) {
-            self.in_out = std::sync::Arc::new(InOut::of(weights)?);
-        }
-        // A handle of its own, so the view does not borrow the engine the passes write into.
-        let in_out = self.in_out.clone();
-        let wv = WeightView::new(weights).with_in_out(&in_out);
-        let t0 = Instant::now();
-        self.encode(model, &wv, images, state, b, Crop::Center, rng)?;
-        self.encode_s = t0.elapsed().as_secs_f64();
-        let n = c.action_chunk * c.action_dim;
-        let mut x = randn(rng, b * n);
-        // Everything that depends on (t, observation) and not on x — the embeddings and every
-        // adaLN modulation — for all the steps at once: one product per layer over
-        // `b · steps` rows instead of a matrix-vector product per layer and step.
-        let ts = scheduler.timesteps();
-        let steps = ts.len();
-        let t_all: Vec<f32> = (0..b).flat_map(|_| ts.iter().map(|&t| t as f32)).collect();
-        denoiser::condition(&sh, &wv, &t_all, &self.cond, steps, &mut self.denoiser)?;
-        let all = self.denoiser.take_modulation();
-        for (j, &t) in ts.iter().enumerate() {
-            let rows: Vec<usize> = (0..b).map(|i| i * steps + j).collect();
-            self.denoiser.set_modulation(&all, &rows);
-            denoiser::trunk(&sh, &wv, &x, &mut self.denoiser)?;
-            scheduler.step_values(&self.denoiser.out, t, &mut x)?;
-        }
-        Ok(x)
+        on_pool(|| {
+            let c = model.config().clone();
+            let sh = shape(&c);
+            let weights = model.weights();
+            if !self.in_out.is_of(weights) {
+                self.in_out = std::sync::Arc::new(InOut::of(weights)?);
+            }
+            // A handle of its own, so the view does not borrow the engine the passes write into.
+            let in_out = self.in_out.clone();
+            let wv = WeightView::new(weights).with_in_out(&in_out);
+            let t0 = Instant::now();
+            self.encode(model, &wv, images, state, b, Crop::Center, rng)?;
+            self.encode_s = t0.elapsed().as_secs_f64();
+            let n = c.action_chunk * c.action_dim;
+            let mut x = randn(rng, b * n);
+            // Everything that depends on (t, observation) and not on x — the embeddings and every
+            // adaLN modulation — for all the steps at once: one product per layer over
+            // `b · steps` rows instead of a matrix-vector product per layer and step.
+            let ts = scheduler.timesteps();
+            let steps = ts.len();
+            let t_all: Vec<f32> = (0..b).flat_map(|_| ts.iter().map(|&t| t as f32)).collect();
+            denoiser::condition(&sh, &wv, &t_all, &self.cond, steps, &mut self.denoiser)?;
+            let all = self.denoiser.take_modulation();
+            for (j, &t) in ts.iter().enumerate() {
+                let rows: Vec<usize> = (0..b).map(|i| i * steps + j).collect();
+                self.denoiser.set_modulation(&all, &rows);
+                denoiser::trunk(&sh, &wv, &x, &mut self.denoiser)?;
+                scheduler.step_values(&self.denoiser.out, t, &mut x)?;
+            }
+            Ok(x)
+        })
     }
 }

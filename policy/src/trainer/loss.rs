@@ -28,6 +28,19 @@ pub struct LossSpec {
     pub mask_padding: bool,
 }
 
+impl LossSpec {
+    /// What the batch's summed squared error is divided by: the action values the loss counts
+    /// (padded steps left out when masked) times the noise draws.
+    pub(crate) fn denominator(&self, batch: &Batch, action_dim: usize) -> f64 {
+        let steps = if self.mask_padding {
+            batch.action_is_pad.iter().filter(|p| !**p).count()
+        } else {
+            batch.action_is_pad.len()
+        };
+        (steps.max(1) * action_dim * self.noise_samples.max(1)) as f64
+    }
+}
+
 impl Default for LossSpec {
     fn default() -> Self {
         LossSpec {
@@ -94,13 +107,7 @@ pub(crate) fn candle_loss_and_grads(
 ) -> Result<(f32, Vec<Option<Tensor>>)> {
     let c = model.config();
     let (b, a) = (batch.len, c.action_dim);
-    let k = spec.noise_samples.max(1);
-    let steps = if spec.mask_padding {
-        batch.action_is_pad.iter().filter(|p| !**p).count()
-    } else {
-        batch.action_is_pad.len()
-    };
-    let denom = (steps.max(1) * a * k) as f64;
+    let denom = spec.denominator(batch, a);
     let step = micro.unwrap_or(b).clamp(1, b.max(1));
     let mut total = 0f32;
     let mut grads: Vec<Option<Tensor>> = vec![None; params.len()];
