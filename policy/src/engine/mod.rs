@@ -22,6 +22,7 @@ use std::sync::Arc;
 use candle_core::{CpuStorage, Layout, Storage, StorageRef, Tensor};
 
 use crate::error::{Error, Result};
+use crate::model::conv::{kernel_to_ohwi, transposed};
 
 pub(crate) use step::{Engine, Sampler};
 
@@ -59,20 +60,12 @@ impl InOut {
                 continue;
             }
             if let &[co, ci, kh, kw] = t.dims() {
-                use crate::model::conv::{kernel_to_ohwi, ohwi_to_hwio};
                 let k = kernel_to_ohwi(ci, kh * kw, view.get(name)?);
-                hwio.insert(name.clone(), Arc::from(ohwi_to_hwio(co, ci * kh * kw, &k)));
+                hwio.insert(name.clone(), Arc::from(transposed(co, ci * kh * kw, &k)));
                 continue;
             }
             let &[out, inp] = t.dims() else { continue };
-            let w = view.get(name)?;
-            let mut c = vec![0f32; out * inp];
-            for (o, row) in w.chunks_exact(inp).enumerate() {
-                for (i, v) in row.iter().enumerate() {
-                    c[i * out + o] = *v;
-                }
-            }
-            map.insert(name.clone(), c);
+            map.insert(name.clone(), transposed(out, inp, view.get(name)?));
         }
         Ok(InOut {
             of: weights.iter().map(|(_, t)| t.id()).collect(),

@@ -126,20 +126,21 @@ pub(crate) fn oihw_to_ohwi(g: &Geom, w: &[f32]) -> Vec<f32> {
     kernel_to_ohwi(g.c_in, g.kh * g.kw, w)
 }
 
-/// [`oihw_to_ohwi`] of a kernel with `ci` input channels and `kk` taps.
-/// A `[C_out, kh, kw, C_in]` kernel (`k` = kh·kw·C_in values per output channel) transposed
-/// to `[kh, kw, C_in, C_out]`: the layout a forward pass with few output pixels multiplies in
-/// place (the GEMM repacks the other one on every call).
-pub(crate) fn ohwi_to_hwio(co: usize, k: usize, w: &[f32]) -> Vec<f32> {
-    let mut out = vec![0f32; w.len()];
-    for (o, row) in w.chunks_exact(k).take(co).enumerate() {
+/// A row-major `[rows, cols]` matrix transposed to `[cols, rows]`: a `[C_out, kh, kw, C_in]`
+/// kernel (`cols` = kh·kw·C_in) to `[kh, kw, C_in, C_out]`, or a Linear weight `[out, in]` to
+/// `[in, out]` — the layouts a forward pass with few rows multiplies in place (the GEMM
+/// repacks the others on every call).
+pub(crate) fn transposed(rows: usize, cols: usize, w: &[f32]) -> Vec<f32> {
+    let mut out = vec![0f32; rows * cols];
+    for (o, row) in w.chunks_exact(cols).take(rows).enumerate() {
         for (i, v) in row.iter().enumerate() {
-            out[i * co + o] = *v;
+            out[i * rows + o] = *v;
         }
     }
     out
 }
 
+/// [`oihw_to_ohwi`] of a kernel with `ci` input channels and `kk` taps.
 pub(crate) fn kernel_to_ohwi(ci: usize, kk: usize, w: &[f32]) -> Vec<f32> {
     let mut out = vec![0f32; w.len()];
     for (o, dst) in out.chunks_mut(ci * kk).enumerate() {
