@@ -19,7 +19,7 @@ pub(crate) fn values<'a>(s: &'a CpuStorage, l: &Layout) -> candle_core::Result<&
 /// `c (+)= op(a) · op(b)`, all row-major: `a` is `[m, k]` (stored `[k, m]` when `a_t`), `b` is
 /// `[k, n]` (stored `[n, k]` when `b_t`), `c` is `[m, n]`; `accumulate` adds to `c` instead of
 /// overwriting it. Large products run on rayon's threads.
-#[allow(clippy::too_many_arguments, unsafe_code)]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn gemm(
     m: usize,
     n: usize,
@@ -28,6 +28,41 @@ pub(crate) fn gemm(
     a_t: bool,
     b: &[f32],
     b_t: bool,
+    c: &mut [f32],
+    accumulate: bool,
+) {
+    let par = if m * n * k >= 1 << 18 {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
+    };
+    product(par, [m, n, k], (a, a_t), (b, b_t), c, accumulate);
+}
+
+/// [`gemm`] on the calling thread only: for callers that already split their work across
+/// rayon's threads (the product's own split would then compete with theirs).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn gemm_serial(
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &[f32],
+    a_t: bool,
+    b: &[f32],
+    b_t: bool,
+    c: &mut [f32],
+    accumulate: bool,
+) {
+    let par = gemm::Parallelism::None;
+    product(par, [m, n, k], (a, a_t), (b, b_t), c, accumulate);
+}
+
+#[allow(unsafe_code)]
+fn product(
+    par: gemm::Parallelism,
+    [m, n, k]: [usize; 3],
+    (a, a_t): (&[f32], bool),
+    (b, b_t): (&[f32], bool),
     c: &mut [f32],
     accumulate: bool,
 ) {
@@ -50,11 +85,6 @@ pub(crate) fn gemm(
         (1, k as isize)
     } else {
         (n as isize, 1)
-    };
-    let par = if m * n * k >= 1 << 18 {
-        gemm::Parallelism::Rayon(0)
-    } else {
-        gemm::Parallelism::None
     };
     // SAFETY: the asserts above keep every index the strides reach inside the slices; `c`
     // does not alias `a` or `b` (a `&mut` borrow).
