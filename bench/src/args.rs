@@ -188,7 +188,8 @@ pub struct BenchTrainArgs {
     /// Rig file, or the name of a shipped rig.
     #[arg(long, default_value = "franka_2zed")]
     pub rig: String,
-    /// Resize images to WxH before the crop (default: as the converter wrote them).
+    /// Images of WxH before the crop: the dataset is converted at that size, as the recipe's
+    /// `scaledp convert --size` does (default: the converter's own size).
     #[arg(long, value_name = "WxH")]
     pub image_size: Option<String>,
     /// Train with a named recipe's settings (cpu-sim: ResNet width 32, two noise draws per

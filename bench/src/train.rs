@@ -1,18 +1,21 @@
 //! `scaledp bench train`: ScaleDP-Ti training throughput on this machine's cores — on a dataset
 //! converted from simulated recordings (2 cameras, images as the converter writes them unless
 //! `--image-size`, cropped to 0.9), To 2, C 16, batch 64 — with the share of step time spent
-//! waiting for the loader; the same model in PyTorch (the wheel's `scaledp_data.policy`) from the
-//! same initial weights on the same threads (when the benchmark venv has torch); and DDIM-10
-//! latency per action chunk for Ti and S.
+//! waiting for the loader; the same step on a synthetic batch (compute only), and the same model
+//! in PyTorch (the wheel's `scaledp_data.policy`) on a synthetic batch from the same initial
+//! weights on the same threads (when the benchmark venv has torch); and DDIM-10 latency per
+//! action chunk for Ti and S.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use candle_core::Device;
-use scaledp_converter::{InputResult, JobOptions};
-use scaledp_policy::bench::{ddim_latency, train_throughput, write_torch_case};
-use scaledp_policy::{ModelConfig, ModelSize, TrainOptions, Trainer};
+use scaledp_converter::{ConvertOptions, InputResult, JobOptions};
+use scaledp_policy::bench::{
+    ddim_latency, synthetic_step_profile, train_throughput, write_torch_case,
+};
+use scaledp_policy::{ModelConfig, ModelSize, Phases, TrainOptions, Trainer};
 use scaledp_schema::Rig;
 use scaledp_testkit::BENCH_VENV;
 
@@ -34,7 +37,8 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     }
     let tmp = tempfile::tempdir().context("creating a temporary directory")?;
     let work = args.out.clone().unwrap_or_else(|| tmp.path().to_path_buf());
-    let dataset = make_dataset(&work, &args)?;
+    let size = args.image_size.as_deref().map(parse_size).transpose()?;
+    let dataset = make_dataset(&work, &args, size)?;
     let ds = dataset.to_string_lossy().to_string();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
 
@@ -55,8 +59,7 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         .val_every(0)
         .seed(0);
     let k = opts.get_loss().noise_samples;
-    if let Some(s) = &args.image_size {
-        let (w, h) = parse_size(s)?;
+    if let Some((w, h)) = size {
         opts = opts.image_size(w, h);
     }
     if let Some(m) = args.micro_batch {
@@ -74,6 +77,7 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         "training {} + 1 warm-up steps in Rust (candle, CPU)…",
         args.steps
     );
+    let spec = opts.get_loss();
     let t = train_throughput(&ds, opts, 1, args.steps, &Device::Cpu)?;
     println!(
         "rust (CPU engine) {:>7.2} s/step  {:>7.2} samples/s  data wait {:.1} % of step time (goal < 5 %)",
@@ -81,16 +85,22 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         t.samples_per_s,
         100.0 * t.data_wait_share
     );
-    let p = &t.phases;
-    let other = (t.step_s - p.encode_s - p.denoise_s - p.backward_s - t.optimizer_s).max(0.0);
-    println!(
-        "  where a step goes: encoders {:.3} s, denoiser + loss {:.3} s, backward {:.3} s, AdamW + EMA {:.3} s, data and the rest {other:.3} s; {} cores busy",
-        p.encode_s,
-        p.denoise_s,
-        p.backward_s,
+    print_phases(
+        &t.phases,
+        t.step_s,
         t.optimizer_s,
-        t.cpu_s.map_or("?".into(), |c| format!("{:.2}", c / t.step_s.max(1e-9)))
+        t.cpu_s,
+        "data and the rest",
     );
+    // The PyTorch route times a step on a synthetic batch, with no loader beside it: so does
+    // this one, for a like-for-like ratio (the loader's decoding shares the same two cores).
+    let s = synthetic_step_profile(&cfg, batch, args.micro_batch, spec, 1, args.steps, 0, false)?;
+    println!(
+        "rust, synthetic batch {:>7.2} s/step  {:>7.2} samples/s  (compute only, as PyTorch's)",
+        s.step_s,
+        batch as f64 / s.step_s.max(1e-9)
+    );
+    print_phases(&s.phases, s.step_s, s.optimizer_s, s.cpu_s, "the rest");
     match torch_route(&args, &cfg, &work, threads, batch, k) {
         Ok(v) => {
             let torch_s = v["mean_step_s"].as_f64().unwrap_or(f64::NAN);
@@ -100,9 +110,10 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
                 v["samples_per_s"].as_f64().unwrap_or(f64::NAN),
             );
             println!(
-                "rust ÷ pytorch speed: {:.2}× (PyTorch's s/step over ours; goal ≥ 1.0)",
-                torch_s / t.step_s
+                "rust ÷ pytorch speed, both on a synthetic batch: {:.2}× (PyTorch's s/step over ours; goal ≥ 1.0)",
+                torch_s / s.step_s
             );
+            println!("  with the loader feeding ours: {:.2}×", torch_s / t.step_s);
         }
         Err(why) => println!("pytorch         not measured: {why}"),
     }
@@ -126,8 +137,21 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     Ok(Outcome::Completed)
 }
 
-/// Simulated recordings of the franka rig, converted into a dataset under `work`.
-fn make_dataset(work: &Path, args: &BenchTrainArgs) -> Result<PathBuf> {
+/// One line of where a step's time goes; `rest` names what the phases leave out.
+fn print_phases(p: &Phases, step_s: f64, optimizer_s: f64, cpu_s: Option<f64>, rest: &str) {
+    let other = (step_s - p.encode_s - p.denoise_s - p.backward_s - optimizer_s).max(0.0);
+    println!(
+        "  where a step goes: encoders {:.3} s, denoiser + loss {:.3} s, backward {:.3} s, AdamW + EMA {optimizer_s:.3} s, {rest} {other:.3} s; {} cores busy",
+        p.encode_s,
+        p.denoise_s,
+        p.backward_s,
+        cpu_s.map_or("?".into(), |c| format!("{:.2}", c / step_s.max(1e-9)))
+    );
+}
+
+/// Simulated recordings of the franka rig, converted into a dataset under `work` (at `size`
+/// when given).
+fn make_dataset(work: &Path, args: &BenchTrainArgs, size: Option<(u32, u32)>) -> Result<PathBuf> {
     let rig =
         Rig::load_or_builtin(&args.rig).with_context(|| format!("loading rig {}", args.rig))?;
     let recordings = work.join("recordings");
@@ -152,7 +176,11 @@ fn make_dataset(work: &Path, args: &BenchTrainArgs) -> Result<PathBuf> {
     let results = scaledp_converter::run(
         &paths,
         &dataset,
-        &JobOptions::default().overwrite(true),
+        &JobOptions::default()
+            .convert(size.map_or(ConvertOptions::default(), |(w, h)| {
+                ConvertOptions::default().size(w, h)
+            }))
+            .overwrite(true),
         &|_| {},
     )?;
     for (path, r) in &results {
