@@ -380,24 +380,27 @@ pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
         });
         return;
     }
-    // Each thread sums its chunks' gradients in a buffer of its own; the buffers are added.
-    let total = (0..g.b)
+    // Each thread sums a fixed, contiguous share of the chunks in a buffer of its own, and the
+    // buffers are added in order: the sums' order, and so the result to the last bit, does
+    // not depend on which thread ran what (a resumed run repeats an uninterrupted one).
+    let starts: Vec<usize> = (0..g.b).step_by(plan.step).collect();
+    let threads = rayon::current_num_threads().min(starts.len()).max(1);
+    let sums: Vec<Vec<f32>> = (0..threads)
         .into_par_iter()
-        .step_by(plan.step)
-        .fold(
-            || vec![0f32; co * k],
-            |mut acc, s0| {
+        .map(|t| {
+            let mut acc = vec![0f32; co * k];
+            let share = &starts[t * starts.len() / threads..(t + 1) * starts.len() / threads];
+            for (i, &s0) in share.iter().enumerate() {
                 let n = plan.step.min(g.b - s0);
-                with_scratch(n * p * k, |cols| add(&mut acc, s0, n, cols, false));
-                acc
-            },
-        )
-        .reduce_with(|mut a, b| {
-            a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
-            a
-        });
-    if let Some(total) = total {
-        dwp[..co * k].copy_from_slice(&total);
+                with_scratch(n * p * k, |cols| add(&mut acc, s0, n, cols, i == 0));
+            }
+            acc
+        })
+        .collect();
+    let dwp = &mut dwp[..co * k];
+    dwp.copy_from_slice(&sums[0]);
+    for sum in &sums[1..] {
+        dwp.iter_mut().zip(sum).for_each(|(a, b)| *a += b);
     }
 }
 

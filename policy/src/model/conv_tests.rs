@@ -42,9 +42,27 @@ fn side_by_side_chunks_add_up() -> candle_core::Result<()> {
             ([9, 80, 80, 64], [4, 64, 3, 3], 1, 1),
             ([12, 15, 13, 3], [5, 3, 7, 7], 2, 3),
         ] {
-            let plan = Plan::new(&Geom::new(&x, &w, stride, pad)?);
-            assert!(plan.parallel, "{x:?} must run side by side");
+            let g = Geom::new(&x, &w, stride, pad)?;
+            assert!(Plan::new(&g).parallel, "{x:?} must run side by side");
             check(x, w, stride, pad)?;
+            // The same gradient to the last bit, run after run.
+            let xs: Vec<f32> = (0..g.b * g.per_in())
+                .map(|i| (i % 13) as f32 * 0.1)
+                .collect();
+            let dy: Vec<f32> = (0..g.b * g.pixels() * g.c_out)
+                .map(|i| ((i % 7) as f32 - 3.0) * 0.3)
+                .collect();
+            let runs: Vec<Vec<f32>> = (0..3)
+                .map(|_| {
+                    let mut dw = vec![0f32; g.c_out * g.k()];
+                    grad_weight(&g, &xs, &dy, &mut dw);
+                    dw
+                })
+                .collect();
+            assert!(
+                runs.windows(2).all(|r| r[0] == r[1]),
+                "{x:?}: not repeatable"
+            );
         }
         Ok(())
     })
