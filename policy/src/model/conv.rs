@@ -19,7 +19,7 @@
 use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use crate::model::cpu::{gemm, gemm_serial, values, with_scratch};
+use crate::model::cpu::{gemm, product, values, with_scratch};
 
 /// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
 const MAX_PATCH_VALUES: usize = 8 << 20;
@@ -278,13 +278,10 @@ impl Plan {
         }
     }
 
-    /// The product for one chunk: on the calling thread when chunks run side by side.
-    fn gemm(&self) -> GemmFn {
-        if self.parallel {
-            gemm_serial
-        } else {
-            gemm
-        }
+    /// The product for one chunk ([`product`]): on the calling thread when chunks run side
+    /// by side.
+    fn gemm(&self, dims: [usize; 3], a: (&[f32], bool), b: (&[f32], bool), c: &mut [f32]) {
+        product(!self.parallel, dims, a, b, c, false);
     }
 
     /// Runs `f(first sample, its part of out, a patch buffer)` for every chunk, `out` holding
@@ -314,8 +311,6 @@ impl Plan {
     }
 }
 
-type GemmFn = fn(usize, usize, usize, &[f32], bool, &[f32], bool, &mut [f32], bool);
-
 /// `out` `[B, H', W', C_out]` = the convolution of `x` (NHWC) with `wp`: `[C_out, kh, kw, C_in]`
 /// (see [`oihw_to_ohwi`]), or `[kh, kw, C_in, C_out]` when `hwio` (see [`transposed`]).
 pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f32]) {
@@ -329,7 +324,7 @@ pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f3
         let n = dst.len() / (p * co);
         let xs = &x[s0 * g.per_in()..(s0 + n) * g.per_in()];
         im2col(g, xs, n, cols, !plan.parallel);
-        plan.gemm()(n * p, co, k, cols, false, wp, !hwio, dst, false);
+        plan.gemm([n * p, co, k], (cols, false), (wp, !hwio), dst);
     });
 }
 
@@ -347,7 +342,7 @@ pub(crate) fn grad_input(g: &Geom, dy: &[f32], wp: &[f32], dx: &mut [f32], accum
             dxs.fill(0.0);
         }
         let dys = &dy[s0 * p * co..(s0 + n) * p * co];
-        plan.gemm()(n * p, k, co, dys, false, wp, false, cols, false);
+        plan.gemm([n * p, k, co], (dys, false), (wp, false), cols);
         col2im(g, cols, dxs, !plan.parallel);
     });
 }
@@ -370,7 +365,14 @@ pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
             !plan.parallel,
         );
         let dys = &dy[s0 * p * co..(s0 + n) * p * co];
-        plan.gemm()(co, k, n * p, dys, true, cols, false, acc, !first);
+        product(
+            !plan.parallel,
+            [co, k, n * p],
+            (dys, true),
+            (cols, false),
+            acc,
+            !first,
+        );
     };
     if !plan.parallel {
         with_scratch(plan.step * p * k, |cols| {

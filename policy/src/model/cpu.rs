@@ -31,35 +31,15 @@ pub(crate) fn gemm(
     c: &mut [f32],
     accumulate: bool,
 ) {
-    let par = if m * n * k >= 1 << 18 {
-        gemm::Parallelism::Rayon(0)
-    } else {
-        gemm::Parallelism::None
-    };
-    product(par, [m, n, k], (a, a_t), (b, b_t), c, accumulate);
+    product(true, [m, n, k], (a, a_t), (b, b_t), c, accumulate);
 }
 
-/// [`gemm`] on the calling thread only: for callers that already split their work across
-/// rayon's threads (the product's own split would then compete with theirs).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn gemm_serial(
-    m: usize,
-    n: usize,
-    k: usize,
-    a: &[f32],
-    a_t: bool,
-    b: &[f32],
-    b_t: bool,
-    c: &mut [f32],
-    accumulate: bool,
-) {
-    let par = gemm::Parallelism::None;
-    product(par, [m, n, k], (a, a_t), (b, b_t), c, accumulate);
-}
-
+/// [`gemm`] with the operands as `(values, transposed)`; a large product runs on rayon's
+/// threads only when `split` (callers that split their work across the threads themselves
+/// keep it on the calling thread, where a split of its own would compete with theirs).
 #[allow(unsafe_code)]
-fn product(
-    par: gemm::Parallelism,
+pub(crate) fn product(
+    split: bool,
     [m, n, k]: [usize; 3],
     (a, a_t): (&[f32], bool),
     (b, b_t): (&[f32], bool),
@@ -85,6 +65,11 @@ fn product(
         (1, k as isize)
     } else {
         (n as isize, 1)
+    };
+    let par = if split && m * n * k >= 1 << 18 {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
     };
     // SAFETY: the asserts above keep every index the strides reach inside the slices; `c`
     // does not alias `a` or `b` (a `&mut` borrow).
