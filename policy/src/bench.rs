@@ -321,3 +321,47 @@ pub fn synthetic_batch(
         frame_index: (0..b as i64).collect(),
     }
 }
+
+/// Median milliseconds of one convolution's three products on the CPU engine's kernels, for
+/// comparing layer by layer with another framework: `[forward, input gradient, weight
+/// gradient]` of a `c_in → c_out`, `k×k`, stride `stride`, padding `k/2` convolution over
+/// `batch` channels-last `hw×hw` inputs, each timed `reps` times after one untimed call.
+pub fn conv_op_ms(
+    batch: usize,
+    (c_in, c_out): (usize, usize),
+    hw: usize,
+    k: usize,
+    stride: usize,
+    reps: usize,
+) -> Result<[f64; 3]> {
+    use crate::model::conv::{self, Geom};
+    let g = Geom::new(&[batch, hw, hw, c_in], &[c_out, c_in, k, k], stride, k / 2)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    let x = crate::model::params::randn(&mut rng, batch * g.per_in());
+    let w = crate::model::params::randn(&mut rng, c_out * g.k());
+    let dy = crate::model::params::randn(&mut rng, batch * g.pixels() * c_out);
+    let (mut y, mut dx, mut dw) = (
+        vec![0f32; dy.len()],
+        vec![0f32; x.len()],
+        vec![0f32; w.len()],
+    );
+    let median = |f: &mut dyn FnMut()| {
+        f();
+        let mut t: Vec<f64> = (0..reps.max(1))
+            .map(|_| {
+                let t0 = Instant::now();
+                f();
+                t0.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        t.sort_by(f64::total_cmp);
+        t[t.len() / 2]
+    };
+    Ok(crate::model::cpu::on_pool(|| {
+        [
+            median(&mut || conv::forward(&g, &x, &w, false, &mut y)),
+            median(&mut || conv::grad_input(&g, &dy, &w, &mut dx, false)),
+            median(&mut || conv::grad_weight(&g, &x, &dy, &mut dw)),
+        ]
+    }))
+}

@@ -15,28 +15,22 @@
 //! matrix at all. The patch matrix is built for a bounded chunk of samples at a time in a
 //! buffer reused between calls. A training batch's chunks run side by side, one per thread,
 //! each with its own patch matrix and a single-threaded GEMM (see [`Plan`]).
+//!
+//! [`forward`], [`grad_input`] and [`grad_weight`] hand the 3×3 stride-1 convolutions of a
+//! map large enough to [`winograd`] (2.25× fewer multiplications); `*_im2col` are the
+//! general kernels, which the Winograd tests hold it to.
 
-use candle_core::{CpuStorage, CustomOp2, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use crate::model::cpu::{gemm, product, values, with_scratch};
+use crate::model::cpu::{gemm, product, with_scratch};
+use crate::model::winograd;
 
 /// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
 const MAX_PATCH_VALUES: usize = 8 << 20;
 
-/// A convolution without bias, PyTorch's `Conv2d(..., bias=False)` with equal stride and
-/// padding on both axes, on a channels-last input: `x` is `[B, H, W, C_in]`, `w` PyTorch's
-/// `[C_out, C_in, kh, kw]`; the output is `[B, H', W', C_out]`. CPU and f32 only.
-pub fn conv2d_nhwc(
-    x: &Tensor,
-    w: &Tensor,
-    stride: usize,
-    padding: usize,
-) -> candle_core::Result<Tensor> {
-    let x = x.contiguous()?;
-    let w = w.contiguous()?;
-    x.apply_op2(&w, Conv { stride, padding })
-}
+#[path = "conv_op.rs"]
+mod op;
+pub use op::conv2d_nhwc;
 
 /// The geometry of one convolution.
 #[derive(Clone, Copy, Debug)]
@@ -314,6 +308,14 @@ impl Plan {
 /// `out` `[B, H', W', C_out]` = the convolution of `x` (NHWC) with `wp`: `[C_out, kh, kw, C_in]`
 /// (see [`oihw_to_ohwi`]), or `[kh, kw, C_in, C_out]` when `hwio` (see [`transposed`]).
 pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f32]) {
+    if !hwio && winograd::applies(g) {
+        return winograd::forward(g, x, wp, out, false);
+    }
+    forward_im2col(g, x, wp, hwio, out);
+}
+
+/// [`forward`] by im2col + GEMM, whatever the geometry.
+pub(crate) fn forward_im2col(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f32]) {
     let (p, k, co) = (g.pixels(), g.k(), g.c_out);
     if g.pointwise() {
         gemm(g.b * p, co, k, x, false, wp, !hwio, out, false);
@@ -330,6 +332,20 @@ pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f3
 
 /// `dx` (NHWC, `B · per_in` values) from `dy` and `wp`; `accumulate` adds to `dx`.
 pub(crate) fn grad_input(g: &Geom, dy: &[f32], wp: &[f32], dx: &mut [f32], accumulate: bool) {
+    if winograd::applies(g) {
+        return winograd::grad_input(g, dy, wp, dx, accumulate);
+    }
+    grad_input_im2col(g, dy, wp, dx, accumulate);
+}
+
+/// [`grad_input`] by GEMM + col2im, whatever the geometry.
+pub(crate) fn grad_input_im2col(
+    g: &Geom,
+    dy: &[f32],
+    wp: &[f32],
+    dx: &mut [f32],
+    accumulate: bool,
+) {
     let (p, k, co) = (g.pixels(), g.k(), g.c_out);
     if g.pointwise() {
         gemm(g.b * p, k, co, dy, false, wp, false, dx, accumulate);
@@ -349,6 +365,14 @@ pub(crate) fn grad_input(g: &Geom, dy: &[f32], wp: &[f32], dx: &mut [f32], accum
 
 /// `dwp` (`[C_out, kh, kw, C_in]`, overwritten) from `x` and `dy`.
 pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
+    if winograd::applies(g) {
+        return winograd::grad_weight(g, x, dy, dwp);
+    }
+    grad_weight_im2col(g, x, dy, dwp);
+}
+
+/// [`grad_weight`] by im2col + GEMM, whatever the geometry.
+pub(crate) fn grad_weight_im2col(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
     let (p, k, co) = (g.pixels(), g.k(), g.c_out);
     if g.pointwise() {
         gemm(co, k, g.b * p, dy, true, x, false, dwp, false);
@@ -403,122 +427,6 @@ pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
     dwp.copy_from_slice(&sums[0]);
     for sum in &sums[1..] {
         dwp.iter_mut().zip(sum).for_each(|(a, b)| *a += b);
-    }
-}
-
-/// `y = conv(x, w)`; its backward is [`GradInput`] and [`GradWeight`].
-struct Conv {
-    stride: usize,
-    padding: usize,
-}
-
-impl CustomOp2 for Conv {
-    fn name(&self) -> &'static str {
-        "scaledp-conv2d-nhwc"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-    ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let g = Geom::new(l1.dims(), l2.dims(), self.stride, self.padding)?;
-        let (x, w) = (values(s1, l1)?, values(s2, l2)?);
-        let wp = oihw_to_ohwi(&g, w);
-        let mut out = vec![0f32; g.b * g.pixels() * g.c_out];
-        forward(&g, x, &wp, false, &mut out);
-        let shape = Shape::from((g.b, g.out_h(), g.out_w(), g.c_out));
-        Ok((CpuStorage::F32(out), shape))
-    }
-
-    fn bwd(
-        &self,
-        x: &Tensor,
-        w: &Tensor,
-        _res: &Tensor,
-        grad: &Tensor,
-    ) -> candle_core::Result<(Option<Tensor>, Option<Tensor>)> {
-        let grad = grad.contiguous()?;
-        // Images entering the first layer need no gradient.
-        let dx = if x.track_op() {
-            Some(grad.apply_op2_no_bwd(
-                w,
-                &GradInput {
-                    stride: self.stride,
-                    padding: self.padding,
-                    x_dims: x.dims().to_vec(),
-                },
-            )?)
-        } else {
-            None
-        };
-        let dw = x.apply_op2_no_bwd(
-            &grad,
-            &GradWeight {
-                stride: self.stride,
-                padding: self.padding,
-                w_dims: w.dims().to_vec(),
-            },
-        )?;
-        Ok((dx, Some(dw)))
-    }
-}
-
-/// `dx` from `dy` (arg 1) and `w` (arg 2).
-struct GradInput {
-    stride: usize,
-    padding: usize,
-    x_dims: Vec<usize>,
-}
-
-impl CustomOp2 for GradInput {
-    fn name(&self) -> &'static str {
-        "scaledp-conv2d-nhwc-grad-input"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-    ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let g = Geom::new(&self.x_dims, l2.dims(), self.stride, self.padding)?;
-        let (dy, w) = (values(s1, l1)?, values(s2, l2)?);
-        let wp = oihw_to_ohwi(&g, w);
-        let mut dx = vec![0f32; g.b * g.per_in()];
-        grad_input(&g, dy, &wp, &mut dx, false);
-        Ok((CpuStorage::F32(dx), Shape::from(self.x_dims.clone())))
-    }
-}
-
-/// `dw` from `x` (arg 1) and `dy` (arg 2).
-struct GradWeight {
-    stride: usize,
-    padding: usize,
-    w_dims: Vec<usize>,
-}
-
-impl CustomOp2 for GradWeight {
-    fn name(&self) -> &'static str {
-        "scaledp-conv2d-nhwc-grad-weight"
-    }
-
-    fn cpu_fwd(
-        &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-    ) -> candle_core::Result<(CpuStorage, Shape)> {
-        let g = Geom::new(l1.dims(), &self.w_dims, self.stride, self.padding)?;
-        let (x, dy) = (values(s1, l1)?, values(s2, l2)?);
-        let mut dwp = vec![0f32; g.c_out * g.k()];
-        grad_weight(&g, x, dy, &mut dwp);
-        let dw = ohwi_to_oihw(&g, &dwp);
-        Ok((CpuStorage::F32(dw), Shape::from(self.w_dims.clone())))
     }
 }
 

@@ -1,7 +1,7 @@
 //! The convolution and its gradients against candle's own conv2d.
 
 use super::*;
-use candle_core::{Device, Var};
+use candle_core::{Device, Tensor, Var};
 
 /// The op and its gradients against candle's own conv2d on the NCHW view.
 #[test]

@@ -37,7 +37,6 @@ pub(crate) fn gemm(
 /// [`gemm`] with the operands as `(values, transposed)`; a large product runs on rayon's
 /// threads only when `split` (callers that split their work across the threads themselves
 /// keep it on the calling thread, where a split of its own would compete with theirs).
-#[allow(unsafe_code)]
 pub(crate) fn product(
     split: bool,
     [m, n, k]: [usize; 3],
@@ -46,26 +45,59 @@ pub(crate) fn product(
     c: &mut [f32],
     accumulate: bool,
 ) {
-    assert!(a.len() >= m * k && b.len() >= k * n && c.len() >= m * n);
+    let a = if a_t {
+        Strided::new(a, 1, m)
+    } else {
+        Strided::new(a, k, 1)
+    };
+    let b = if b_t {
+        Strided::new(b, 1, k)
+    } else {
+        Strided::new(b, n, 1)
+    };
+    strided_product(split, [m, n, k], a, b, (c, n), accumulate);
+}
+
+/// A matrix operand read in place: element (i, j) is `values[i · rs + j · cs]`.
+#[derive(Clone, Copy)]
+pub(crate) struct Strided<'a> {
+    pub values: &'a [f32],
+    pub rs: usize,
+    pub cs: usize,
+}
+
+impl<'a> Strided<'a> {
+    pub(crate) fn new(values: &'a [f32], rs: usize, cs: usize) -> Self {
+        Strided { values, rs, cs }
+    }
+    /// Whether every element of a `rows × cols` matrix lies inside `values`.
+    fn holds(&self, rows: usize, cols: usize) -> bool {
+        rows == 0 || cols == 0 || self.values.len() > (rows - 1) * self.rs + (cols - 1) * self.cs
+    }
+}
+
+/// [`product`] on strided operands: `c` (row stride `c.1`, unit column stride) `(+)= a · b`,
+/// `a` `[m, k]`, `b` `[k, n]`.
+#[allow(unsafe_code)]
+pub(crate) fn strided_product(
+    split: bool,
+    [m, n, k]: [usize; 3],
+    a: Strided,
+    b: Strided,
+    (c, c_rs): (&mut [f32], usize),
+    accumulate: bool,
+) {
+    let cm = Strided::new(c, c_rs, 1);
+    assert!(a.holds(m, k) && b.holds(k, n) && cm.holds(m, n) && c_rs >= n);
     if m == 0 || n == 0 {
         return;
     }
     if k == 0 {
         if !accumulate {
-            c[..m * n].fill(0.0);
+            c.chunks_mut(c_rs).take(m).for_each(|r| r[..n].fill(0.0));
         }
         return;
     }
-    let (a_rs, a_cs) = if a_t {
-        (1, m as isize)
-    } else {
-        (k as isize, 1)
-    };
-    let (b_rs, b_cs) = if b_t {
-        (1, k as isize)
-    } else {
-        (n as isize, 1)
-    };
     let par = if split && m * n * k >= 1 << 18 {
         gemm::Parallelism::Rayon(0)
     } else {
@@ -80,14 +112,14 @@ pub(crate) fn product(
             k,
             c.as_mut_ptr(),
             1,
-            n as isize,
+            c_rs as isize,
             accumulate,
-            a.as_ptr(),
-            a_cs,
-            a_rs,
-            b.as_ptr(),
-            b_cs,
-            b_rs,
+            a.values.as_ptr(),
+            a.cs as isize,
+            a.rs as isize,
+            b.values.as_ptr(),
+            b.cs as isize,
+            b.rs as isize,
             1.0,
             1.0,
             false,
