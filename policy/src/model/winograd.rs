@@ -25,15 +25,22 @@ use crate::model::cpu::{strided_product, with_scratch, Strided};
 /// Largest transformed chunk (input and output tiles together, f32 values) per thread.
 const MAX_CHUNK_VALUES: usize = 4 << 20;
 
-/// Whether `g` is a 3×3, stride-1, padding-1 convolution whose map tiles with little waste
-/// (at most 0.7 of im2col's multiplications: a 3×3 map, 4 tiles for 9 outputs, stays on
-/// im2col).
+/// Whether Winograd runs `g`: it [`fits`], and it pays, measured layer by layer on the
+/// 2-core machine (`conv_ops` example): the map tiles with little waste (at most 0.7 of
+/// im2col's multiplications: a 3×3 map, 4 tiles for 9 outputs, does not), the channels are 64
+/// or more (the transforms cost per value what the product costs per channel: at 32 channels
+/// a 15×15 layer ran no faster), and the batch has 2,048 tiles or more (the transformed kernel
+/// is packed again for every chunk: a 2×2 map of 256 channels, 128 tiles, ran 2× slower).
 pub(crate) fn applies(g: &Geom) -> bool {
-    g.kh == 3
-        && g.kw == 3
-        && g.stride == 1
-        && g.padding == 1
-        && 10 * 16 * g.h.div_ceil(2) * g.w.div_ceil(2) <= 7 * 9 * g.h * g.w
+    fits(g)
+        && 10 * 16 * tiles(g) <= 7 * 9 * g.h * g.w
+        && g.c_in.min(g.c_out) >= 64
+        && g.b * tiles(g) >= 2048
+}
+
+/// Whether `g` is a 3×3, stride-1, padding-1 convolution, which these kernels compute.
+pub(crate) fn fits(g: &Geom) -> bool {
+    g.kh == 3 && g.kw == 3 && g.stride == 1 && g.padding == 1
 }
 
 /// Tiles of one sample.

@@ -24,7 +24,7 @@ fn close(what: &str, a: &[f32], b: &[f32]) {
 /// equal im2col's, within f32 rounding.
 fn check(b: usize, (h, w): (usize, usize), (ci, co): (usize, usize)) {
     let g = Geom::new(&[b, h, w, ci], &[co, ci, 3, 3], 1, 1).unwrap();
-    assert!(applies(&g), "{h}×{w} must take the Winograd path");
+    assert!(fits(&g));
     let (x, wp, dy) = (
         values(b * h * w * ci, 1),
         values(co * 9 * ci, 2),
@@ -88,14 +88,19 @@ fn weight_gradient_repeats_bit_for_bit() {
     });
 }
 
-/// Where tiles waste more than they save (a 3×3 map), and for any other geometry, the
-/// im2col kernels stay.
+/// Where Winograd does not pay (a 3×3 map, few channels, few tiles), and for any other
+/// geometry, the im2col kernels stay.
 #[test]
 fn applies_only_where_it_pays() {
-    let g = |h: usize, k: usize, s: usize, p: usize| {
-        Geom::new(&[1, h, h, 4], &[4, 4, k, k], s, p).unwrap()
+    let g = |b: usize, h: usize, c: usize, (k, s, p): (usize, usize, usize)| {
+        Geom::new(&[b, h, h, c], &[c, c, k, k], s, p).unwrap()
     };
-    assert!(applies(&g(19, 3, 1, 1)) && applies(&g(5, 3, 1, 1)) && applies(&g(2, 3, 1, 1)));
-    assert!(!applies(&g(3, 3, 1, 1)));
-    assert!(!applies(&g(10, 3, 2, 1)) && !applies(&g(10, 1, 1, 0)) && !applies(&g(10, 7, 1, 3)));
+    let same = (3, 1, 1);
+    // The 84×84 bench's layers 1 and 2 (128 images of a camera).
+    assert!(applies(&g(128, 19, 64, same)) && applies(&g(128, 10, 128, same)));
+    assert!(!applies(&g(128, 3, 512, same)), "a 3×3 map wastes tiles");
+    assert!(!applies(&g(128, 15, 32, same)), "32 channels");
+    assert!(!applies(&g(128, 2, 256, same)), "128 tiles");
+    assert!(!applies(&g(128, 10, 64, (3, 2, 1))) && !applies(&g(128, 10, 64, (1, 1, 0))));
+    assert!(!applies(&g(128, 10, 64, (7, 1, 3))) && !fits(&g(1, 10, 4, (7, 1, 3))));
 }
