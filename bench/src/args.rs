@@ -203,9 +203,17 @@ pub struct BenchTrainArgs {
     /// Forward/backward at most this many samples at a time.
     #[arg(long)]
     pub micro_batch: Option<usize>,
-    /// Timed steps (after one warm-up step).
+    /// Timed steps (after the warm-up steps).
     #[arg(long, default_value_t = 3)]
     pub steps: usize,
+    /// Untimed steps first, on each side: PyTorch's second and third steps still run 20–40 %
+    /// slower than its later ones (its allocator and oneDNN's primitive cache filling).
+    #[arg(long, default_value_t = 3)]
+    pub warmup: usize,
+    /// Rounds of the Rust-vs-PyTorch comparison, the two sides alternating (the figure is the
+    /// median of the rounds' ratios).
+    #[arg(long, default_value_t = 3)]
+    pub rounds: usize,
     /// DDIM chunks timed per model size.
     #[arg(long, default_value_t = 20)]
     pub latency_runs: usize,
