@@ -166,6 +166,21 @@ fn corner(r: usize, w: usize) -> (usize, usize) {
     (2 * (r / tx), 2 * (r % tx))
 }
 
+/// Pixel (y, x) of one sample's channels-last `h×w×c` map, or `zero` outside it (a row or
+/// column of −1 wraps around to outside).
+fn pixel<'a>(
+    xs: &'a [f32],
+    (h, w, c): (usize, usize, usize),
+    (y, x): (usize, usize),
+    zero: &'a [f32],
+) -> &'a [f32] {
+    if y < h && x < w {
+        &xs[(y * w + x) * c..(y * w + x + 1) * c]
+    } else {
+        zero
+    }
+}
+
 /// `V` `[n · tiles, 16, C]` = `Bᵀ d B` of every tile's 4×4 input patch (zero outside the map)
 /// of the `n` samples `x` (NHWC, `C = g.c_in`).
 fn input_transform(g: &Geom, x: &[f32], n: usize, v: &mut [f32], par: bool) {
@@ -178,12 +193,12 @@ fn input_transform(g: &Geom, x: &[f32], n: usize, v: &mut [f32], par: bool) {
         for (r, vt) in vs.chunks_exact_mut(16 * c).enumerate() {
             let (by, bx) = corner(r, w);
             let d = |i: usize, j: usize| {
-                let (y, xx) = ((by + i).wrapping_sub(1), (bx + j).wrapping_sub(1));
-                if y < h && xx < w {
-                    &xs[(y * w + xx) * c..(y * w + xx + 1) * c]
-                } else {
-                    &zero[..]
-                }
+                pixel(
+                    xs,
+                    (h, w, c),
+                    ((by + i).wrapping_sub(1), (bx + j).wrapping_sub(1)),
+                    &zero,
+                )
             };
             let mut ms: Vec<&mut [f32]> = m.chunks_exact_mut(c).collect();
             for j in 0..4 {
@@ -251,14 +266,7 @@ fn grad_output_transform(g: &Geom, dy: &[f32], n: usize, dm: &mut [f32], par: bo
         let mut q = vec![0f32; 8 * c];
         for (r, mt) in ms.chunks_exact_mut(16 * c).enumerate() {
             let (by, bx) = corner(r, w);
-            let d = |i: usize, j: usize| {
-                let (y, x) = (by + i, bx + j);
-                if y < h && x < w {
-                    &ds[(y * w + x) * c..(y * w + x + 1) * c]
-                } else {
-                    &zero[..]
-                }
-            };
+            let d = |i: usize, j: usize| pixel(ds, (h, w, c), (by + i, bx + j), &zero);
             let mut qs: Vec<&mut [f32]> = q.chunks_exact_mut(c).collect();
             for j in 0..2 {
                 bin(qs[j], d(0, j), &zero, false);
