@@ -17,13 +17,14 @@
 //! each with its own patch matrix and a single-threaded GEMM (see [`Plan`]).
 //!
 //! [`forward`], [`grad_input`] and [`grad_weight`] hand the 3×3 stride-1 convolutions of a
-//! map large enough to [`winograd`] (2.25× fewer multiplications); `*_im2col` are the
-//! general kernels, which the Winograd tests hold it to.
+//! map large enough to [`winograd`] (2.25× fewer multiplications), and those of the small
+//! maps to [`taps`] (which skips the padding); `*_im2col` are the general kernels, which the
+//! tests of both hold them to.
 
 use rayon::prelude::*;
 
 use crate::model::cpu::{gemm, product, with_scratch};
-use crate::model::winograd;
+use crate::model::{taps, winograd};
 
 /// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
 const MAX_PATCH_VALUES: usize = 8 << 20;
@@ -311,6 +312,9 @@ pub(crate) fn forward(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &mut [f3
     if !hwio && winograd::applies(g) {
         return winograd::forward(g, x, wp, out, false);
     }
+    if !hwio && taps::applies(g) {
+        return taps::forward(g, x, wp, out);
+    }
     forward_im2col(g, x, wp, hwio, out);
 }
 
@@ -334,6 +338,9 @@ pub(crate) fn forward_im2col(g: &Geom, x: &[f32], wp: &[f32], hwio: bool, out: &
 pub(crate) fn grad_input(g: &Geom, dy: &[f32], wp: &[f32], dx: &mut [f32], accumulate: bool) {
     if winograd::applies(g) {
         return winograd::grad_input(g, dy, wp, dx, accumulate);
+    }
+    if taps::applies(g) {
+        return taps::grad_input(g, dy, wp, dx, accumulate);
     }
     grad_input_im2col(g, dy, wp, dx, accumulate);
 }
@@ -367,6 +374,9 @@ pub(crate) fn grad_input_im2col(
 pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
     if winograd::applies(g) {
         return winograd::grad_weight(g, x, dy, dwp);
+    }
+    if taps::applies(g) {
+        return taps::grad_weight(g, x, dy, dwp);
     }
     grad_weight_im2col(g, x, dy, dwp);
 }

@@ -9,6 +9,7 @@ pub(crate) mod encoder;
 pub(crate) mod fused;
 pub(crate) mod params;
 pub(crate) mod resnet;
+pub(crate) mod taps;
 pub(crate) mod winograd;
 
 use candle_core::{Device, Tensor};
