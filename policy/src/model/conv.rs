@@ -443,3 +443,7 @@ pub(crate) fn grad_weight_im2col(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32
 #[cfg(test)]
 #[path = "conv_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "conv_check.rs"]
+pub(crate) mod check;

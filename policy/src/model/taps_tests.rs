@@ -1,26 +1,16 @@
 //! The tap-by-tap convolution and both gradients against the im2col kernels they replace.
 
 use super::*;
-use crate::model::conv;
+use crate::model::conv::check::{against_im2col, Kernels};
 
-fn values(n: usize, seed: usize) -> Vec<f32> {
-    (0..n)
-        .map(|i| (((i * 7919 + seed * 104_729) % 2003) as f32 / 1001.0) - 1.0)
-        .collect()
-}
+const TAPS: Kernels = Kernels {
+    name: "taps",
+    forward,
+    grad_input,
+    grad_weight,
+};
 
-fn close(what: &str, a: &[f32], b: &[f32]) {
-    assert_eq!(a.len(), b.len(), "{what}: lengths");
-    let scale = b.iter().fold(1f32, |m, v| m.max(v.abs()));
-    for (i, (x, y)) in a.iter().zip(b).enumerate() {
-        assert!(
-            (x - y).abs() <= 1e-5 * scale,
-            "{what}[{i}]: taps {x} vs im2col {y} (scale {scale})"
-        );
-    }
-}
-
-/// Forward, input gradient (overwritten and accumulated) and weight gradient equal im2col's.
+/// One geometry (`k×k` kernel, stride `s`, padding `p`) against im2col.
 fn check(
     b: usize,
     (h, w): (usize, usize),
@@ -28,27 +18,7 @@ fn check(
     (k, s, p): (usize, usize, usize),
 ) {
     let g = Geom::new(&[b, h, w, ci], &[co, ci, k, k], s, p).unwrap();
-    let out = b * g.pixels() * co;
-    let (x, wp, dy) = (
-        values(b * h * w * ci, 1),
-        values(co * g.k(), 2),
-        values(out, 3),
-    );
-    let (mut ours, mut theirs) = (values(out, 7), vec![0f32; out]);
-    forward(&g, &x, &wp, &mut ours);
-    conv::forward_im2col(&g, &x, &wp, false, &mut theirs);
-    close("forward", &ours, &theirs);
-    let start = values(b * h * w * ci, 4);
-    for acc in [false, true] {
-        let (mut ours, mut theirs) = (start.clone(), start.clone());
-        grad_input(&g, &dy, &wp, &mut ours, acc);
-        conv::grad_input_im2col(&g, &dy, &wp, &mut theirs, acc);
-        close("input gradient", &ours, &theirs);
-    }
-    let (mut ours, mut theirs) = (vec![1f32; wp.len()], vec![0f32; wp.len()]);
-    grad_weight(&g, &x, &dy, &mut ours);
-    conv::grad_weight_im2col(&g, &x, &dy, &mut theirs);
-    close("weight gradient", &ours, &theirs);
+    against_im2col(&g, &TAPS, 1e-5);
 }
 
 /// The trunk's small maps (3×3 and 5×5 at stride 1, the strided convolutions into them), a

@@ -1,50 +1,20 @@
 //! Winograd's convolution and both gradients against the im2col kernels they replace.
 
 use super::*;
-use crate::model::conv;
+use crate::model::conv::check::{against_im2col, values, Kernels};
 
-fn values(n: usize, seed: usize) -> Vec<f32> {
-    (0..n)
-        .map(|i| (((i * 7919 + seed * 104_729) % 2003) as f32 / 1001.0) - 1.0)
-        .collect()
-}
+const WINOGRAD: Kernels = Kernels {
+    name: "winograd",
+    forward: |g, x, wp, out| forward(g, x, wp, out, false),
+    grad_input,
+    grad_weight,
+};
 
-fn close(what: &str, a: &[f32], b: &[f32]) {
-    assert_eq!(a.len(), b.len(), "{what}: lengths");
-    let scale = b.iter().fold(1f32, |m, v| m.max(v.abs()));
-    for (i, (x, y)) in a.iter().zip(b).enumerate() {
-        assert!(
-            (x - y).abs() <= 2e-5 * scale,
-            "{what}[{i}]: winograd {x} vs im2col {y} (scale {scale})"
-        );
-    }
-}
-
-/// Forward, input gradient (overwritten and accumulated) and weight gradient of one geometry
-/// equal im2col's, within f32 rounding.
+/// One 3×3, stride-1, padding-1 geometry against im2col.
 fn check(b: usize, (h, w): (usize, usize), (ci, co): (usize, usize)) {
     let g = Geom::new(&[b, h, w, ci], &[co, ci, 3, 3], 1, 1).unwrap();
     assert!(fits(&g));
-    let (x, wp, dy) = (
-        values(b * h * w * ci, 1),
-        values(co * 9 * ci, 2),
-        values(b * h * w * co, 3),
-    );
-    let (mut ours, mut theirs) = (vec![0f32; b * h * w * co], vec![0f32; b * h * w * co]);
-    forward(&g, &x, &wp, &mut ours, false);
-    conv::forward_im2col(&g, &x, &wp, false, &mut theirs);
-    close("forward", &ours, &theirs);
-    let start = values(b * h * w * ci, 4);
-    for acc in [false, true] {
-        let (mut ours, mut theirs) = (start.clone(), start.clone());
-        grad_input(&g, &dy, &wp, &mut ours, acc);
-        conv::grad_input_im2col(&g, &dy, &wp, &mut theirs, acc);
-        close("input gradient", &ours, &theirs);
-    }
-    let (mut ours, mut theirs) = (vec![1f32; wp.len()], vec![0f32; wp.len()]);
-    grad_weight(&g, &x, &dy, &mut ours);
-    conv::grad_weight_im2col(&g, &x, &dy, &mut theirs);
-    close("weight gradient", &ours, &theirs);
+    against_im2col(&g, &WINOGRAD, 2e-5);
 }
 
 /// Odd and even maps (overhanging tiles), channel counts off the vector width, one sample
