@@ -23,7 +23,7 @@
 
 use rayon::prelude::*;
 
-use crate::model::cpu::{gemm, product, with_scratch};
+use crate::model::cpu::{gemm, product, side_by_side, sum_in_order, with_scratch};
 use crate::model::{taps, winograd};
 
 /// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
@@ -257,7 +257,7 @@ impl Plan {
     /// about 1.2 of 2 cores. A few samples (inference) keep the split GEMM.
     fn new(g: &Geom) -> Self {
         let threads = rayon::current_num_threads();
-        if threads < 2 || g.b < 4 * threads {
+        if !side_by_side(g.b) {
             return Plan {
                 step: g.chunk(),
                 parallel: false,
@@ -434,10 +434,7 @@ pub(crate) fn grad_weight_im2col(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32
         })
         .collect();
     let dwp = &mut dwp[..co * k];
-    dwp.copy_from_slice(&sums[0]);
-    for sum in &sums[1..] {
-        dwp.iter_mut().zip(sum).for_each(|(a, b)| *a += b);
-    }
+    sum_in_order(dwp, sums.iter().map(Vec::as_slice));
 }
 
 #[cfg(test)]

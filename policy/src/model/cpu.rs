@@ -130,6 +130,23 @@ pub(crate) fn strided_product(
     }
 }
 
+/// Whether `samples` of a training batch run in chunks side by side, one per thread, each
+/// chunk's products on its thread alone (the convolution kernels' shared rule): with samples
+/// enough for several per thread. A few samples (inference) keep one split GEMM.
+pub(crate) fn side_by_side(samples: usize) -> bool {
+    let threads = rayon::current_num_threads();
+    threads >= 2 && samples >= 4 * threads
+}
+
+/// `out` = the sum of `parts` (each `out.len()` values), added in order: per-thread partial
+/// sums added this way give the same bits whichever thread computed which part.
+pub(crate) fn sum_in_order<'a>(out: &mut [f32], parts: impl IntoIterator<Item = &'a [f32]>) {
+    out.fill(0.0);
+    for part in parts {
+        out.iter_mut().zip(part).for_each(|(a, b)| *a += b);
+    }
+}
+
 thread_local! {
     static SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
 }

@@ -9,7 +9,7 @@
 //! [`applies`] picks the maps where enough of the taps fall on the padding.
 
 use crate::model::conv::Geom;
-use crate::model::cpu::{strided_product, with_scratch, Strided};
+use crate::model::cpu::{side_by_side, strided_product, sum_in_order, with_scratch, Strided};
 
 /// Whether `g` goes tap by tap: a kernel larger than 1×1 on a small map (64 output pixels or
 /// fewer) with at least 35 % of its taps on the padding. Measured layer by layer (`conv_ops`
@@ -107,9 +107,8 @@ fn taps(g: &Geom) -> Vec<(usize, Pixels, Pixels)> {
 /// Samples per chunk, and whether the chunks run side by side (one per thread, each product
 /// on its thread alone: the gathers and scatters then run in parallel too), as `conv`'s plan.
 fn plan(g: &Geom) -> (usize, bool) {
-    let threads = rayon::current_num_threads();
-    if threads >= 2 && g.b >= 4 * threads {
-        (g.b.div_ceil(threads), true)
+    if side_by_side(g.b) {
+        (g.b.div_ceil(rayon::current_num_threads()), true)
     } else {
         (g.b.max(1), false)
     }
@@ -234,10 +233,7 @@ pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
         }
     }
     let dwp = &mut dwp[..co * k];
-    dwp.copy_from_slice(&sums[..co * k]);
-    for sum in sums.chunks(co * k).skip(1) {
-        dwp.iter_mut().zip(sum).for_each(|(a, b)| *a += b);
-    }
+    sum_in_order(dwp, sums.chunks(co * k));
 }
 
 #[cfg(test)]

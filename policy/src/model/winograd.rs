@@ -20,7 +20,7 @@
 use rayon::prelude::*;
 
 use crate::model::conv::Geom;
-use crate::model::cpu::{strided_product, with_scratch, Strided};
+use crate::model::cpu::{side_by_side, strided_product, sum_in_order, with_scratch, Strided};
 
 /// Largest transformed chunk (input and output tiles together, f32 values) per thread.
 const MAX_CHUNK_VALUES: usize = 4 << 20;
@@ -52,7 +52,7 @@ fn tiles(g: &Geom) -> usize {
 /// side by side (one thread each, single-threaded products) for a training batch.
 fn plan(g: &Geom, per_sample: usize) -> (usize, bool) {
     let threads = rayon::current_num_threads();
-    let parallel = threads >= 2 && g.b >= 4 * threads;
+    let parallel = side_by_side(g.b);
     let budget = if parallel {
         MAX_CHUNK_VALUES
     } else {
@@ -382,10 +382,8 @@ pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
                 du
             })
             .collect();
-        let mut du = sums[0].clone();
-        for sum in &sums[1..] {
-            du.iter_mut().zip(sum).for_each(|(a, b)| *a += b);
-        }
+        let mut du = vec![0f32; 16 * ci * co];
+        sum_in_order(&mut du, sums.iter().map(Vec::as_slice));
         du
     } else {
         let mut du = vec![0f32; 16 * ci * co];
