@@ -29,8 +29,9 @@ fn chunks_add_up() -> candle_core::Result<()> {
 }
 
 /// A training batch's chunks run side by side, one thread each, and the weight gradient's
-/// per-thread sums add up: with a chunk per sample and an odd batch (a last chunk alone), and
-/// with several samples per chunk and a strided kernel.
+/// per-thread sums add up: with a chunk per sample and an odd batch (a last chunk alone), with
+/// cache-sized chunks of several samples, several to a thread (the recipe's 32-channel layer),
+/// and with a strided kernel.
 #[test]
 fn side_by_side_chunks_add_up() -> candle_core::Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -40,10 +41,19 @@ fn side_by_side_chunks_add_up() -> candle_core::Result<()> {
     pool.install(|| {
         for (x, w, stride, pad) in [
             ([9, 80, 80, 64], [4, 64, 3, 3], 1, 1),
+            ([16, 15, 15, 32], [32, 32, 3, 3], 1, 1),
             ([12, 15, 13, 3], [5, 3, 7, 7], 2, 3),
         ] {
             let g = Geom::new(&x, &w, stride, pad)?;
-            assert!(Plan::new(&g).parallel, "{x:?} must run side by side");
+            let plan = Plan::new(&g);
+            assert!(plan.parallel, "{x:?} must run side by side");
+            if x[3] == 32 {
+                assert!(
+                    plan.step > 1 && plan.step < 8,
+                    "{x:?}: {} a chunk",
+                    plan.step
+                );
+            }
             check(x, w, stride, pad)?;
             // The same gradient to the last bit, run after run.
             let xs: Vec<f32> = (0..g.b * g.per_in())

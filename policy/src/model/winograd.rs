@@ -25,6 +25,12 @@ use crate::model::cpu::{side_by_side, strided_product, sum_in_order, with_scratc
 /// Largest transformed chunk (input and output tiles together, f32 values) per thread.
 const MAX_CHUNK_VALUES: usize = 4 << 20;
 
+/// The transformed chunk a thread aims at when chunks run side by side (f32 values): 512 K =
+/// 2 MiB, mostly in cache between the transforms and the 16 products. With 4 M a chunk, the
+/// 84×84 trunk's 64-channel 19×19 layer took 16 ms a product, with 512 K–1 M 12 ms
+/// (`conv_ops` example).
+const CACHED_CHUNK_VALUES: usize = 1 << 19;
+
 /// Whether Winograd runs `g`: it [`fits`], and it pays, measured layer by layer on the
 /// 2-core machine (`conv_ops` example): the map tiles with little waste (at most 0.7 of
 /// im2col's multiplications: a 3×3 map, 4 tiles for 9 outputs, does not), the channels are 64
@@ -54,7 +60,8 @@ fn plan(g: &Geom, per_sample: usize) -> (usize, bool) {
     let threads = rayon::current_num_threads();
     let parallel = side_by_side(g.b);
     let budget = if parallel {
-        MAX_CHUNK_VALUES
+        // At least 4 transformed kernels' worth: the products pack it again for every chunk.
+        CACHED_CHUNK_VALUES.max(4 * 16 * g.c_in * g.c_out)
     } else {
         MAX_CHUNK_VALUES * threads
     };
