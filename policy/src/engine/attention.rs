@@ -5,6 +5,8 @@
 
 use rayon::prelude::*;
 
+use crate::model::cpu::vectorized;
+
 /// Shape of one attention call.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct AttnDims {
@@ -48,43 +50,45 @@ pub(crate) fn forward(a: AttnDims, qkv: &[f32], o: &mut [f32], probs: &mut [f32]
         .zip(qkv.par_chunks(t * 3 * d))
         .zip(probs_chunks.into_par_iter())
         .for_each(|((os, x), ps)| {
-            for h in 0..a.heads {
-                let p = &mut ps[h * t * t..(h + 1) * t * t];
-                for i in 0..t {
-                    let q = &x[i * 3 * d + h * hd..][..hd];
-                    let row = &mut p[i * t..(i + 1) * t];
-                    let mut max = f32::NEG_INFINITY;
-                    for (j, r) in row.iter_mut().enumerate() {
-                        if a.causal && j > i {
-                            *r = f32::NEG_INFINITY;
-                            continue;
+            vectorized(|| {
+                for h in 0..a.heads {
+                    let p = &mut ps[h * t * t..(h + 1) * t * t];
+                    for i in 0..t {
+                        let q = &x[i * 3 * d + h * hd..][..hd];
+                        let row = &mut p[i * t..(i + 1) * t];
+                        let mut max = f32::NEG_INFINITY;
+                        for (j, r) in row.iter_mut().enumerate() {
+                            if a.causal && j > i {
+                                *r = f32::NEG_INFINITY;
+                                continue;
+                            }
+                            let k = &x[j * 3 * d + d + h * hd..][..hd];
+                            let s = dot(q, k) * scale;
+                            *r = s;
+                            max = max.max(s);
                         }
-                        let k = &x[j * 3 * d + d + h * hd..][..hd];
-                        let s: f32 = q.iter().zip(k).map(|(a, b)| a * b).sum::<f32>() * scale;
-                        *r = s;
-                        max = max.max(s);
-                    }
-                    let mut sum = 0f32;
-                    for r in row.iter_mut() {
-                        *r = (*r - max).exp();
-                        sum += *r;
-                    }
-                    for r in row.iter_mut() {
-                        *r /= sum;
-                    }
-                    let out = &mut os[i * d + h * hd..][..hd];
-                    out.fill(0.0);
-                    for (j, &pj) in row.iter().enumerate() {
-                        if pj == 0.0 {
-                            continue;
+                        let mut sum = 0f32;
+                        for r in row.iter_mut() {
+                            *r = (*r - max).exp();
+                            sum += *r;
                         }
-                        let v = &x[j * 3 * d + 2 * d + h * hd..][..hd];
-                        for (o, v) in out.iter_mut().zip(v) {
-                            *o += pj * v;
+                        for r in row.iter_mut() {
+                            *r /= sum;
+                        }
+                        let out = &mut os[i * d + h * hd..][..hd];
+                        out.fill(0.0);
+                        for (j, &pj) in row.iter().enumerate() {
+                            if pj == 0.0 {
+                                continue;
+                            }
+                            let v = &x[j * 3 * d + 2 * d + h * hd..][..hd];
+                            for (o, v) in out.iter_mut().zip(v) {
+                                *o += pj * v;
+                            }
                         }
                     }
                 }
-            }
+            })
         });
 }
 
@@ -98,45 +102,74 @@ pub(crate) fn backward(a: AttnDims, qkv: &[f32], probs: &[f32], do_: &[f32], dqk
         .zip(qkv.par_chunks(t * 3 * d))
         .zip(probs.par_chunks(per_p).zip(do_.par_chunks(t * d)))
         .for_each(|((dx, x), (ps, dos))| {
-            dx.fill(0.0);
-            let mut ds = vec![0f32; t * t];
-            for h in 0..a.heads {
-                let p = &ps[h * t * t..(h + 1) * t * t];
-                // dP = dO · Vᵀ, then dS = P ∘ (dP − rowsum(P ∘ dP)); dV = Pᵀ · dO.
-                for i in 0..t {
-                    let dout = &dos[i * d + h * hd..][..hd];
-                    let prow = &p[i * t..(i + 1) * t];
-                    let mut dot = 0f32;
-                    for j in 0..t {
-                        let v = &x[j * 3 * d + 2 * d + h * hd..][..hd];
-                        let dp: f32 = dout.iter().zip(v).map(|(a, b)| a * b).sum();
-                        ds[i * t + j] = dp;
-                        dot += prow[j] * dp;
-                        if prow[j] != 0.0 {
-                            let dv = &mut dx[j * 3 * d + 2 * d + h * hd..][..hd];
-                            for (g, o) in dv.iter_mut().zip(dout) {
-                                *g += prow[j] * o;
+            vectorized(|| {
+                dx.fill(0.0);
+                let mut ds = vec![0f32; t * t];
+                for h in 0..a.heads {
+                    let p = &ps[h * t * t..(h + 1) * t * t];
+                    // dP = dO · Vᵀ, then dS = P ∘ (dP − rowsum(P ∘ dP)); dV = Pᵀ · dO.
+                    for i in 0..t {
+                        let dout = &dos[i * d + h * hd..][..hd];
+                        let prow = &p[i * t..(i + 1) * t];
+                        let mut pdp = 0f32;
+                        for j in 0..t {
+                            let v = &x[j * 3 * d + 2 * d + h * hd..][..hd];
+                            let dp = dot(dout, v);
+                            ds[i * t + j] = dp;
+                            pdp += prow[j] * dp;
+                            if prow[j] != 0.0 {
+                                let dv = &mut dx[j * 3 * d + 2 * d + h * hd..][..hd];
+                                for (g, o) in dv.iter_mut().zip(dout) {
+                                    *g += prow[j] * o;
+                                }
                             }
                         }
-                    }
-                    for j in 0..t {
-                        ds[i * t + j] = prow[j] * (ds[i * t + j] - dot) * scale;
-                    }
-                }
-                // dQ = dS · K, dK = dSᵀ · Q.
-                for i in 0..t {
-                    for j in 0..t {
-                        let g = ds[i * t + j];
-                        if g == 0.0 {
-                            continue;
+                        for j in 0..t {
+                            ds[i * t + j] = prow[j] * (ds[i * t + j] - pdp) * scale;
                         }
-                        let (qi, kj) = (i * 3 * d + h * hd, j * 3 * d + d + h * hd);
-                        for c in 0..hd {
-                            dx[qi + c] += g * x[kj + c];
-                            dx[kj + c] += g * x[qi + c];
+                    }
+                    // dQ = dS · K, dK = dSᵀ · Q (a row of q and one of k are disjoint columns).
+                    for i in 0..t {
+                        for j in 0..t {
+                            let g = ds[i * t + j];
+                            if g == 0.0 {
+                                continue;
+                            }
+                            let (qi, kj) = (i * 3 * d + h * hd, j * 3 * d + d + h * hd);
+                            axpy(&mut dx[qi..qi + hd], g, &x[kj..kj + hd]);
+                            axpy(&mut dx[kj..kj + hd], g, &x[qi..qi + hd]);
                         }
                     }
                 }
-            }
+            })
         });
+}
+
+/// `Σ a·b` over 16 lanes: an iterator's `sum` adds in order, one dependent addition per
+/// element, which the compiler may not reorder into vector lanes (the attention's dot products
+/// ran at one element per add's latency).
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let (ca, cb) = (a.chunks_exact(16), b.chunks_exact(16));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    let mut acc = [0f32; 16];
+    for (x, y) in ca.zip(cb) {
+        for ((s, x), y) in acc.iter_mut().zip(x).zip(y) {
+            *s += x * y;
+        }
+    }
+    acc.iter().sum::<f32>() + tail
+}
+
+/// `y += a · x`.
+#[inline]
+fn axpy(y: &mut [f32], a: f32, x: &[f32]) {
+    for (y, x) in y.iter_mut().zip(x) {
+        *y += a * x;
+    }
 }

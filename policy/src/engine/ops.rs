@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use crate::model::cpu::gemm;
+use crate::model::cpu::{gemm, vectorized};
 
 /// Rows per parallel task: enough work to amortise a task, enough tasks to keep both cores busy.
 pub(crate) fn rows_per_task(rows: usize, width: usize) -> usize {
@@ -58,11 +58,13 @@ pub(crate) fn linear<'a>(
     if let Some(b) = b {
         let per = rows_per_task(rows, n);
         y[..rows * n].par_chunks_mut(per * n).for_each(|ys| {
-            for row in ys.chunks_exact_mut(n) {
-                for (v, bb) in row.iter_mut().zip(b) {
-                    *v += bb;
+            vectorized(|| {
+                for row in ys.chunks_exact_mut(n) {
+                    for (v, bb) in row.iter_mut().zip(b) {
+                        *v += bb;
+                    }
                 }
-            }
+            })
         });
     }
 }
@@ -121,19 +123,21 @@ pub(crate) fn layer_norm(x: &[f32], d: usize, eps: f64, n: &mut [f32], rstd: &mu
         .zip(x.par_chunks(per * d))
         .zip(rstd[..rows].par_chunks_mut(per))
         .for_each(|((ns, xs), rs)| {
-            for ((nr, xr), r) in ns.chunks_exact_mut(d).zip(xs.chunks_exact(d)).zip(rs) {
-                let mean = xr.iter().map(|v| f64::from(*v)).sum::<f64>() / d as f64;
-                let var = xr
-                    .iter()
-                    .map(|v| (f64::from(*v) - mean).powi(2))
-                    .sum::<f64>()
-                    / d as f64;
-                let rs = 1.0 / (var + eps).sqrt();
-                *r = rs as f32;
-                for (o, v) in nr.iter_mut().zip(xr) {
-                    *o = ((f64::from(*v) - mean) * rs) as f32;
+            vectorized(|| {
+                for ((nr, xr), r) in ns.chunks_exact_mut(d).zip(xs.chunks_exact(d)).zip(rs) {
+                    let mean = xr.iter().map(|v| f64::from(*v)).sum::<f64>() / d as f64;
+                    let var = xr
+                        .iter()
+                        .map(|v| (f64::from(*v) - mean).powi(2))
+                        .sum::<f64>()
+                        / d as f64;
+                    let rs = 1.0 / (var + eps).sqrt();
+                    *r = rs as f32;
+                    for (o, v) in nr.iter_mut().zip(xr) {
+                        *o = ((f64::from(*v) - mean) * rs) as f32;
+                    }
                 }
-            }
+            })
         });
 }
 
@@ -153,27 +157,29 @@ pub(crate) fn layer_norm_backward(
         .zip(n.par_chunks(per * d).zip(dn.par_chunks(per * d)))
         .zip(rstd[..rows].par_chunks(per))
         .for_each(|((dxs, (ns, dns)), rs)| {
-            for (((dxr, nr), dnr), r) in dxs
-                .chunks_exact_mut(d)
-                .zip(ns.chunks_exact(d))
-                .zip(dns.chunks_exact(d))
-                .zip(rs)
-            {
-                let (mut s, mut sn) = (0f32, 0f32);
-                for (a, b) in dnr.iter().zip(nr) {
-                    s += a;
-                    sn += a * b;
-                }
-                let (m, mn) = (s / d as f32, sn / d as f32);
-                for ((o, a), b) in dxr.iter_mut().zip(dnr).zip(nr) {
-                    let v = r * (a - m - b * mn);
-                    if accumulate {
-                        *o += v;
-                    } else {
-                        *o = v;
+            vectorized(|| {
+                for (((dxr, nr), dnr), r) in dxs
+                    .chunks_exact_mut(d)
+                    .zip(ns.chunks_exact(d))
+                    .zip(dns.chunks_exact(d))
+                    .zip(rs)
+                {
+                    let (mut s, mut sn) = (0f32, 0f32);
+                    for (a, b) in dnr.iter().zip(nr) {
+                        s += a;
+                        sn += a * b;
+                    }
+                    let (m, mn) = (s / d as f32, sn / d as f32);
+                    for ((o, a), b) in dxr.iter_mut().zip(dnr).zip(nr) {
+                        let v = r * (a - m - b * mn);
+                        if accumulate {
+                            *o += v;
+                        } else {
+                            *o = v;
+                        }
                     }
                 }
-            }
+            })
         });
 }
 
@@ -245,9 +251,11 @@ pub(crate) fn map(x: &[f32], y: &mut [f32], f: impl Fn(f32) -> f32 + Sync) {
         .par_chunks_mut(1 << 14)
         .zip(x.par_chunks(1 << 14))
         .for_each(|(ys, xs)| {
-            for (o, v) in ys.iter_mut().zip(xs) {
-                *o = f(*v);
-            }
+            vectorized(|| {
+                for (o, v) in ys.iter_mut().zip(xs) {
+                    *o = f(*v);
+                }
+            })
         });
 }
 
@@ -257,9 +265,11 @@ pub(crate) fn map_grad(x: &[f32], dy: &mut [f32], f: impl Fn(f32) -> f32 + Sync)
         .par_chunks_mut(1 << 14)
         .zip(x.par_chunks(1 << 14))
         .for_each(|(ds, xs)| {
-            for (d, v) in ds.iter_mut().zip(xs) {
-                *d *= f(*v);
-            }
+            vectorized(|| {
+                for (d, v) in ds.iter_mut().zip(xs) {
+                    *d *= f(*v);
+                }
+            })
         });
 }
 
@@ -280,13 +290,15 @@ pub(crate) fn modulate(
         .zip(n.par_chunks(tokens * d))
         .enumerate()
         .for_each(|(s, (us, ns))| {
-            let row = &m[s * stride..(s + 1) * stride];
-            let (shift, scale) = (&row[shift_at..shift_at + d], &row[scale_at..scale_at + d]);
-            for (ur, nr) in us.chunks_exact_mut(d).zip(ns.chunks_exact(d)) {
-                for j in 0..d {
-                    ur[j] = nr[j] * (1.0 + scale[j]) + shift[j];
+            vectorized(|| {
+                let row = &m[s * stride..(s + 1) * stride];
+                let (shift, scale) = (&row[shift_at..shift_at + d], &row[scale_at..scale_at + d]);
+                for (ur, nr) in us.chunks_exact_mut(d).zip(ns.chunks_exact(d)) {
+                    for j in 0..d {
+                        ur[j] = nr[j] * (1.0 + scale[j]) + shift[j];
+                    }
                 }
-            }
+            })
         });
 }
 
@@ -310,17 +322,19 @@ pub(crate) fn modulate_backward(
         .zip(dm.par_chunks_mut(stride))
         .enumerate()
         .for_each(|(s, ((dns, (ns, dus)), dmr))| {
-            let scale = &m[s * stride + scale_at..s * stride + scale_at + d];
-            for (dnr, (nr, dur)) in dns
-                .chunks_exact_mut(d)
-                .zip(ns.chunks_exact(d).zip(dus.chunks_exact(d)))
-            {
-                for j in 0..d {
-                    dnr[j] = dur[j] * (1.0 + scale[j]);
-                    dmr[shift_at + j] += dur[j];
-                    dmr[scale_at + j] += dur[j] * nr[j];
+            vectorized(|| {
+                let scale = &m[s * stride + scale_at..s * stride + scale_at + d];
+                for (dnr, (nr, dur)) in dns
+                    .chunks_exact_mut(d)
+                    .zip(ns.chunks_exact(d).zip(dus.chunks_exact(d)))
+                {
+                    for j in 0..d {
+                        dnr[j] = dur[j] * (1.0 + scale[j]);
+                        dmr[shift_at + j] += dur[j];
+                        dmr[scale_at + j] += dur[j] * nr[j];
+                    }
                 }
-            }
+            })
         });
 }
 
@@ -341,12 +355,14 @@ pub(crate) fn gated_add(
         .zip(a.par_chunks(tokens * d))
         .enumerate()
         .for_each(|(s, (hs, as_))| {
-            let gate = &m[s * stride + gate_at..s * stride + gate_at + d];
-            for (hr, ar) in hs.chunks_exact_mut(d).zip(as_.chunks_exact(d)) {
-                for j in 0..d {
-                    hr[j] += gate[j] * ar[j];
+            vectorized(|| {
+                let gate = &m[s * stride + gate_at..s * stride + gate_at + d];
+                for (hr, ar) in hs.chunks_exact_mut(d).zip(as_.chunks_exact(d)) {
+                    for j in 0..d {
+                        hr[j] += gate[j] * ar[j];
+                    }
                 }
-            }
+            })
         });
 }
 
@@ -369,16 +385,18 @@ pub(crate) fn gated_add_backward(
         .zip(dm.par_chunks_mut(stride))
         .enumerate()
         .for_each(|(s, ((das, (dhs, as_)), dmr))| {
-            let gate = &m[s * stride + gate_at..s * stride + gate_at + d];
-            for (dar, (dhr, ar)) in das
-                .chunks_exact_mut(d)
-                .zip(dhs.chunks_exact(d).zip(as_.chunks_exact(d)))
-            {
-                for j in 0..d {
-                    dar[j] = dhr[j] * gate[j];
-                    dmr[gate_at + j] += dhr[j] * ar[j];
+            vectorized(|| {
+                let gate = &m[s * stride + gate_at..s * stride + gate_at + d];
+                for (dar, (dhr, ar)) in das
+                    .chunks_exact_mut(d)
+                    .zip(dhs.chunks_exact(d).zip(as_.chunks_exact(d)))
+                {
+                    for j in 0..d {
+                        dar[j] = dhr[j] * gate[j];
+                        dmr[gate_at + j] += dhr[j] * ar[j];
+                    }
                 }
-            }
+            })
         });
 }
 
@@ -388,8 +406,10 @@ pub(crate) fn add_into(a: &mut [f32], b: &[f32]) {
         .par_chunks_mut(1 << 14)
         .zip(b.par_chunks(1 << 14))
         .for_each(|(xs, ys)| {
-            for (x, y) in xs.iter_mut().zip(ys) {
-                *x += y;
-            }
+            vectorized(|| {
+                for (x, y) in xs.iter_mut().zip(ys) {
+                    *x += y;
+                }
+            })
         });
 }

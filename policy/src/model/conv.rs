@@ -23,7 +23,7 @@
 
 use rayon::prelude::*;
 
-use crate::model::cpu::{gemm, product, side_by_side, sum_in_order, with_scratch};
+use crate::model::cpu::{gemm, product, side_by_side, sum_in_order, vectorized, with_scratch};
 use crate::model::{taps, winograd};
 
 /// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
@@ -204,9 +204,11 @@ fn im2col(g: &Geom, x: &[f32], n: usize, cols: &mut [f32], par: bool) {
         }
     };
     if par {
-        cols.par_chunks_mut(ow * k).enumerate().for_each(fill);
+        cols.par_chunks_mut(ow * k)
+            .enumerate()
+            .for_each(|r| vectorized(|| fill(r)));
     } else {
-        cols.chunks_mut(ow * k).enumerate().for_each(fill);
+        vectorized(|| cols.chunks_mut(ow * k).enumerate().for_each(fill));
     }
 }
 
@@ -241,9 +243,11 @@ fn col2im(g: &Geom, cols: &[f32], dx: &mut [f32], par: bool) {
         }
     };
     if par {
-        dx.par_chunks_mut(g.per_in()).enumerate().for_each(add);
+        dx.par_chunks_mut(g.per_in())
+            .enumerate()
+            .for_each(|s| vectorized(|| add(s)));
     } else {
-        dx.chunks_mut(g.per_in()).enumerate().for_each(add);
+        vectorized(|| dx.chunks_mut(g.per_in()).enumerate().for_each(add));
     }
 }
 

@@ -8,7 +8,7 @@
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, CustomOp3, Layout, Shape, Tensor};
 use rayon::prelude::*;
 
-use crate::model::cpu::values;
+use crate::model::cpu::{values, vectorized};
 
 /// `GroupNorm(groups, eps)` of a channels-last `x` `[N, *, C]` with per-channel `gamma`,
 /// `beta`, then ReLU when `relu`. CPU and f32 only.
@@ -88,30 +88,52 @@ impl Dims {
     }
 }
 
-/// Per group of one sample (`x` `[S, C]`): mean and 1/σ, two passes in f64 for accuracy.
+/// Rows summed in f32 before their sums are added into f64: the f32 loops run vector-wide,
+/// and a block's f32 sum (32 values a channel) loses about as little as the f64 sum.
+const BLOCK_ROWS: usize = 32;
+
+/// Per channel of rows `x` `[S, C]`: `Σ x`, or `Σ (x − center)²` when `center` is given.
+#[inline]
+fn channel_sums(x: &[f32], c: usize, center: Option<&[f32]>) -> Vec<f64> {
+    let (mut total, mut part) = (vec![0f64; c], vec![0f32; c]);
+    for block in x.chunks(BLOCK_ROWS * c) {
+        part.fill(0.0);
+        for row in block.chunks_exact(c) {
+            match center {
+                None => part.iter_mut().zip(row).for_each(|(p, v)| *p += v),
+                Some(mu) => {
+                    for ((p, v), m) in part.iter_mut().zip(row).zip(mu) {
+                        let e = v - m;
+                        *p += e * e;
+                    }
+                }
+            }
+        }
+        total
+            .iter_mut()
+            .zip(&part)
+            .for_each(|(t, p)| *t += f64::from(*p));
+    }
+    total
+}
+
+/// Per group of one sample (`x` `[S, C]`): mean and 1/σ, two passes (sums kept in f64).
+#[inline]
 fn stats(d: &Dims, x: &[f32], eps: f64) -> (Vec<f32>, Vec<f32>) {
     let cg = d.c / d.g;
     let m = d.m().max(1) as f64;
-    let mut sum = vec![0f64; d.c];
-    for px in x.chunks_exact(d.c) {
-        for (s, &v) in sum.iter_mut().zip(px) {
-            *s += f64::from(v);
-        }
-    }
-    let mean: Vec<f64> = sum.chunks(cg).map(|s| s.iter().sum::<f64>() / m).collect();
-    let mean_c: Vec<f64> = (0..d.c).map(|c| mean[c / cg]).collect();
-    let mut sq = vec![0f64; d.c];
-    for px in x.chunks_exact(d.c) {
-        for ((s, &v), &mu) in sq.iter_mut().zip(px).zip(&mean_c) {
-            let e = f64::from(v) - mu;
-            *s += e * e;
-        }
-    }
+    let sum = channel_sums(x, d.c, None);
+    let mean: Vec<f32> = sum
+        .chunks(cg)
+        .map(|s| (s.iter().sum::<f64>() / m) as f32)
+        .collect();
+    let mean_c: Vec<f32> = (0..d.c).map(|c| mean[c / cg]).collect();
+    let sq = channel_sums(x, d.c, Some(&mean_c));
     let rstd = sq
         .chunks(cg)
         .map(|s| (1.0 / (s.iter().sum::<f64>() / m + eps).sqrt()) as f32)
         .collect();
-    (mean.iter().map(|&v| v as f32).collect(), rstd)
+    (mean, rstd)
 }
 
 /// GroupNorm (then ReLU when `relu`) of channels-last `x` into `y`, parallel over samples.
@@ -129,16 +151,18 @@ pub(crate) fn group_norm_forward(
         .par_chunks_mut(d.per())
         .zip(x.par_chunks(d.per()))
         .for_each(|(y, x)| {
-            let (mean, rstd) = stats(d, x, eps);
-            // y = x·a + b per channel.
-            let a: Vec<f32> = (0..d.c).map(|c| rstd[c / cg] * gamma[c]).collect();
-            let b: Vec<f32> = (0..d.c).map(|c| beta[c] - mean[c / cg] * a[c]).collect();
-            for (y, x) in y.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
-                for (((y, &x), &a), &b) in y.iter_mut().zip(x).zip(&a).zip(&b) {
-                    let v = x * a + b;
-                    *y = if relu { v.max(0.0) } else { v };
+            vectorized(|| {
+                let (mean, rstd) = stats(d, x, eps);
+                // y = x·a + b per channel.
+                let a: Vec<f32> = (0..d.c).map(|c| rstd[c / cg] * gamma[c]).collect();
+                let b: Vec<f32> = (0..d.c).map(|c| beta[c] - mean[c / cg] * a[c]).collect();
+                for (y, x) in y.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
+                    for (((y, &x), &a), &b) in y.iter_mut().zip(x).zip(&a).zip(&b) {
+                        let v = x * a + b;
+                        *y = if relu { v.max(0.0) } else { v };
+                    }
                 }
-            }
+            })
         });
 }
 
@@ -221,56 +245,59 @@ pub(crate) fn group_norm_backward(
         .zip(dy.par_chunks(d.per()))
         .zip(partial.par_chunks_mut(d.c * 2))
         .for_each(|(((dx, x), dy), part)| {
-            let (mean, rstd) = stats(d, x, eps);
-            let mean_c: Vec<f32> = (0..d.c).map(|c| mean[c / cg]).collect();
-            let rstd_c: Vec<f32> = (0..d.c).map(|c| rstd[c / cg]).collect();
-            let (sg, sb) = part.split_at_mut(d.c);
-            // Pass 1: e into dx, and the per-channel sums.
-            let (mut sgf, mut sbf) = (vec![0f32; d.c], vec![0f32; d.c]);
-            for ((dx, x), dy) in dx
-                .chunks_exact_mut(d.c)
-                .zip(x.chunks_exact(d.c))
-                .zip(dy.chunks_exact(d.c))
-            {
-                for c in 0..d.c {
-                    let xhat = (x[c] - mean_c[c]) * rstd_c[c];
-                    let mut e = dy[c];
-                    if relu && xhat * gamma[c] + beta[c] <= 0.0 {
-                        e = 0.0;
+            vectorized(|| {
+                let (mean, rstd) = stats(d, x, eps);
+                let mean_c: Vec<f32> = (0..d.c).map(|c| mean[c / cg]).collect();
+                let rstd_c: Vec<f32> = (0..d.c).map(|c| rstd[c / cg]).collect();
+                let (sg, sb) = part.split_at_mut(d.c);
+                // Pass 1: e into dx, and the per-channel sums (f32 over a block of rows, then f64).
+                let (c, gamma, beta) = (d.c, &gamma[..d.c], &beta[..d.c]);
+                let (mu, rs) = (&mean_c[..c], &rstd_c[..c]);
+                let (mut sgf, mut sbf) = (vec![0f32; c], vec![0f32; c]);
+                let blocks = dx
+                    .chunks_mut(BLOCK_ROWS * c)
+                    .zip(x.chunks(BLOCK_ROWS * c))
+                    .zip(dy.chunks(BLOCK_ROWS * c));
+                for ((dxb, xb), dyb) in blocks {
+                    sgf.fill(0.0);
+                    sbf.fill(0.0);
+                    let rows = dxb
+                        .chunks_exact_mut(c)
+                        .zip(xb.chunks_exact(c))
+                        .zip(dyb.chunks_exact(c));
+                    for ((dx, x), dy) in rows {
+                        let sums = (&mut sgf[..], &mut sbf[..]);
+                        backward_row(dx, x, dy, (mu, rs), (gamma, beta), relu, sums);
                     }
-                    dx[c] = e;
-                    sgf[c] += e * xhat;
-                    sbf[c] += e;
+                    for k in 0..c {
+                        sg[k] += f64::from(sgf[k]);
+                        sb[k] += f64::from(sbf[k]);
+                    }
                 }
-                // Flush the f32 partial sums into f64 every row keeps their error small.
-                for c in 0..d.c {
-                    sg[c] += f64::from(sgf[c]);
-                    sb[c] += f64::from(sbf[c]);
+                // Group sums of dx̂ = e·γ and dx̂·x̂.
+                let mut mean_d = vec![0f32; d.g];
+                let mut mean_dx = vec![0f32; d.g];
+                for g in 0..d.g {
+                    let (mut s_d, mut s_dx) = (0f64, 0f64);
+                    for c in g * cg..(g + 1) * cg {
+                        s_d += f64::from(gamma[c]) * sb[c];
+                        s_dx += f64::from(gamma[c]) * sg[c];
+                    }
+                    mean_d[g] = (s_d / m) as f32;
+                    mean_dx[g] = (s_dx / m) as f32;
                 }
-                sgf.fill(0.0);
-                sbf.fill(0.0);
-            }
-            // Group sums of dx̂ = e·γ and dx̂·x̂.
-            let mut mean_d = vec![0f32; d.g];
-            let mut mean_dx = vec![0f32; d.g];
-            for g in 0..d.g {
-                let (mut s_d, mut s_dx) = (0f64, 0f64);
-                for c in g * cg..(g + 1) * cg {
-                    s_d += f64::from(gamma[c]) * sb[c];
-                    s_dx += f64::from(gamma[c]) * sg[c];
+                let md_c: Vec<f32> = (0..d.c).map(|c| mean_d[c / cg]).collect();
+                let mdx_c: Vec<f32> = (0..d.c).map(|c| mean_dx[c / cg]).collect();
+                // Pass 2: dx = 1/σ · (e·γ − mean(dx̂) − x̂ · mean(dx̂·x̂)).
+                let (md, mdx) = (&md_c[..c], &mdx_c[..c]);
+                for (dx, x) in dx.chunks_exact_mut(c).zip(x.chunks_exact(c)) {
+                    let (dx, x) = (&mut dx[..c], &x[..c]);
+                    for k in 0..c {
+                        let xhat = (x[k] - mu[k]) * rs[k];
+                        dx[k] = rs[k] * (dx[k] * gamma[k] - md[k] - xhat * mdx[k]);
+                    }
                 }
-                mean_d[g] = (s_d / m) as f32;
-                mean_dx[g] = (s_dx / m) as f32;
-            }
-            let md_c: Vec<f32> = (0..d.c).map(|c| mean_d[c / cg]).collect();
-            let mdx_c: Vec<f32> = (0..d.c).map(|c| mean_dx[c / cg]).collect();
-            // Pass 2: dx = 1/σ · (e·γ − mean(dx̂) − x̂ · mean(dx̂·x̂)).
-            for (dx, x) in dx.chunks_exact_mut(d.c).zip(x.chunks_exact(d.c)) {
-                for c in 0..d.c {
-                    let xhat = (x[c] - mean_c[c]) * rstd_c[c];
-                    dx[c] = rstd_c[c] * (dx[c] * gamma[c] - md_c[c] - xhat * mdx_c[c]);
-                }
-            }
+            })
         });
     let (mut dgamma, mut dbeta) = (vec![0f64; d.c], vec![0f64; d.c]);
     for part in partial.chunks(2 * d.c) {
@@ -287,6 +314,32 @@ pub(crate) fn group_norm_backward(
             dgamma_out[c] = dgamma[c] as f32;
             dbeta_out[c] = dbeta[c] as f32;
         }
+    }
+}
+
+/// Pass 1 of [`group_norm_backward`] on one row of channels: `e` (`dy` through the ReLU) into
+/// `dx`, and `Σ e·x̂`, `Σ e` added into `sums`. A function of its own over slices cut to one
+/// length, and branch-free: inlined into the closure, the loop ran scalar.
+#[inline]
+fn backward_row(
+    dx: &mut [f32],
+    x: &[f32],
+    dy: &[f32],
+    (mu, rs): (&[f32], &[f32]),
+    (gamma, beta): (&[f32], &[f32]),
+    relu: bool,
+    (sg, sb): (&mut [f32], &mut [f32]),
+) {
+    let c = dx.len();
+    let (x, dy, mu, rs) = (&x[..c], &dy[..c], &mu[..c], &rs[..c]);
+    let (gamma, beta, sg, sb) = (&gamma[..c], &beta[..c], &mut sg[..c], &mut sb[..c]);
+    for k in 0..c {
+        let (xhat, g) = ((x[k] - mu[k]) * rs[k], dy[k]);
+        let cut = relu & (xhat * gamma[k] + beta[k] <= 0.0);
+        let e = if cut { 0.0 } else { g };
+        dx[k] = e;
+        sg[k] += e * xhat;
+        sb[k] += e;
     }
 }
 
@@ -388,13 +441,15 @@ pub(crate) fn max_pool_forward((h, w, c): (usize, usize, usize), x: &[f32], y: &
     y.par_chunks_mut(oh * ow * c)
         .zip(x.par_chunks(h * w * c))
         .for_each(|(y, x)| {
-            windows(h, w, |oy, ox, pos, first| {
-                let out = &mut y[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
-                let v = &x[pos * c..(pos + 1) * c];
-                for (o, &vi) in out.iter_mut().zip(v) {
-                    *o = if first | replaces(vi, *o) { vi } else { *o };
-                }
-            });
+            vectorized(|| {
+                windows(h, w, |oy, ox, pos, first| {
+                    let out = &mut y[(oy * ow + ox) * c..(oy * ow + ox + 1) * c];
+                    let v = &x[pos * c..(pos + 1) * c];
+                    for (o, &vi) in out.iter_mut().zip(v) {
+                        *o = if first | replaces(vi, *o) { vi } else { *o };
+                    }
+                });
+            })
         });
 }
 
@@ -411,10 +466,12 @@ pub(crate) fn max_pool_backward(
         .par_chunks_mut(h * w * c)
         .zip(x.par_chunks(h * w * c).zip(dy.par_chunks(per)))
         .for_each(|(dx, (x, dy))| {
-            dx.fill(0.0);
-            for (&k, &g) in argmax(x, h, w, c).iter().zip(dy) {
-                dx[k as usize] += g;
-            }
+            vectorized(|| {
+                dx.fill(0.0);
+                for (&k, &g) in argmax(x, h, w, c).iter().zip(dy) {
+                    dx[k as usize] += g;
+                }
+            })
         });
 }
 
@@ -474,9 +531,11 @@ pub(crate) fn add_relu_forward(a: &[f32], b: &[f32], y: &mut [f32]) {
         .par_chunks_mut(1 << 14)
         .zip(a.par_chunks(1 << 14).zip(b.par_chunks(1 << 14)))
         .for_each(|(y, (a, b))| {
-            for ((y, &a), &b) in y.iter_mut().zip(a).zip(b) {
-                *y = (a + b).max(0.0);
-            }
+            vectorized(|| {
+                for ((y, &a), &b) in y.iter_mut().zip(a).zip(b) {
+                    *y = (a + b).max(0.0);
+                }
+            })
         });
 }
 
@@ -486,9 +545,11 @@ pub(crate) fn relu_backward(y: &[f32], dy: &[f32], dx: &mut [f32]) {
         .par_chunks_mut(1 << 14)
         .zip(y.par_chunks(1 << 14).zip(dy.par_chunks(1 << 14)))
         .for_each(|(dx, (y, dy))| {
-            for ((dx, &y), &g) in dx.iter_mut().zip(y).zip(dy) {
-                *dx = if y > 0.0 { g } else { 0.0 };
-            }
+            vectorized(|| {
+                for ((dx, &y), &g) in dx.iter_mut().zip(y).zip(dy) {
+                    *dx = if y > 0.0 { g } else { 0.0 };
+                }
+            })
         });
 }
 

@@ -9,7 +9,9 @@
 //! [`applies`] picks the maps where enough of the taps fall on the padding.
 
 use crate::model::conv::Geom;
-use crate::model::cpu::{side_by_side, strided_product, sum_in_order, with_scratch, Strided};
+use crate::model::cpu::{
+    side_by_side, strided_product, sum_in_order, vectorized, with_scratch, Strided,
+};
 
 /// Whether `g` goes tap by tap: a kernel larger than 1×1 on a small map (64 output pixels or
 /// fewer) with at least 35 % of its taps on the padding. Measured layer by layer (`conv_ops`
@@ -128,9 +130,11 @@ fn chunked(g: &Geom, out: &mut [f32], per: usize, f: impl Fn(&Geom, usize, &mut 
     };
     let out = &mut out[..g.b * per];
     if parallel {
-        out.par_chunks_mut(step * per).enumerate().for_each(run);
+        out.par_chunks_mut(step * per)
+            .enumerate()
+            .for_each(|c| vectorized(|| run(c)));
     } else {
-        out.chunks_mut(step * per).enumerate().for_each(run);
+        vectorized(|| out.chunks_mut(step * per).enumerate().for_each(run));
     }
 }
 
@@ -227,9 +231,11 @@ pub(crate) fn grad_weight(g: &Geom, x: &[f32], dy: &[f32], dwp: &mut [f32]) {
         use rayon::prelude::*;
         let run = |(c, acc): (usize, &mut [f32])| part(c * step, acc);
         if parallel {
-            sums.par_chunks_mut(co * k).enumerate().for_each(run);
+            sums.par_chunks_mut(co * k)
+                .enumerate()
+                .for_each(|c| vectorized(|| run(c)));
         } else {
-            sums.chunks_mut(co * k).enumerate().for_each(run);
+            vectorized(|| sums.chunks_mut(co * k).enumerate().for_each(run));
         }
     }
     let dwp = &mut dwp[..co * k];

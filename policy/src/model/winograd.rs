@@ -20,7 +20,9 @@
 use rayon::prelude::*;
 
 use crate::model::conv::Geom;
-use crate::model::cpu::{side_by_side, strided_product, sum_in_order, with_scratch, Strided};
+use crate::model::cpu::{
+    side_by_side, strided_product, sum_in_order, vectorized, with_scratch, Strided,
+};
 
 /// Largest transformed chunk (input and output tiles together, f32 values) per thread.
 const MAX_CHUNK_VALUES: usize = 4 << 20;
@@ -161,9 +163,9 @@ fn per_sample(out: &mut [f32], per: usize, par: bool, f: impl Fn(usize, &mut [f3
     if par {
         out.par_chunks_mut(per)
             .enumerate()
-            .for_each(|(s, o)| f(s, o));
+            .for_each(|(s, o)| vectorized(|| f(s, o)));
     } else {
-        out.chunks_mut(per).enumerate().for_each(|(s, o)| f(s, o));
+        vectorized(|| out.chunks_mut(per).enumerate().for_each(|(s, o)| f(s, o)));
     }
 }
 

@@ -10,6 +10,7 @@ use candle_core::{CpuStorage, InplaceOp2, Layout, Tensor};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::model::cpu::vectorized;
 use crate::model::params::Param;
 
 /// AdamW's hyper-parameters (diffusion_policy / ScaleDP defaults).
@@ -279,13 +280,17 @@ impl InplaceOp2 for FusedAdamW<'_> {
             .zip(v.par_chunks_mut(CHUNK))
             .zip(g.par_chunks(CHUNK))
             .for_each(|(((p, m), v), g)| {
-                for i in 0..p.len() {
-                    let gi = g[i] * gs;
-                    m[i] = b1 * m[i] + (1.0 - b1) * gi;
-                    v[i] = b2 * v[i] + (1.0 - b2) * gi * gi;
-                    let denom = v[i].sqrt() * inv_sqrt_bc2 + eps;
-                    p[i] = p[i] * decay - step * m[i] / denom;
-                }
+                let n = p.len();
+                let (m, v, g) = (&mut m[..n], &mut v[..n], &g[..n]);
+                vectorized(|| {
+                    for i in 0..n {
+                        let gi = g[i] * gs;
+                        m[i] = b1 * m[i] + (1.0 - b1) * gi;
+                        v[i] = b2 * v[i] + (1.0 - b2) * gi * gi;
+                        let denom = v[i].sqrt() * inv_sqrt_bc2 + eps;
+                        p[i] = p[i] * decay - step * m[i] / denom;
+                    }
+                });
             });
         Ok(())
     }
@@ -371,9 +376,11 @@ impl InplaceOp2 for EmaOp {
             .par_chunks_mut(1 << 14)
             .zip(src.par_chunks(1 << 14))
             .for_each(|(e, p)| {
-                for (e, p) in e.iter_mut().zip(p) {
-                    *e = d * *e + (1.0 - d) * p;
-                }
+                vectorized(|| {
+                    for (e, p) in e.iter_mut().zip(p) {
+                        *e = d * *e + (1.0 - d) * p;
+                    }
+                })
             });
         Ok(())
     }
