@@ -48,9 +48,9 @@ impl Stream {
         frame_at(&self.stamps_ns, self.period_s, t_ns, stale_periods)
     }
 
-    /// The joint rule, see [`sample_at`].
-    pub fn sample_at(&self, t_ns: u64) -> ((usize, usize, f64), bool) {
-        sample_at(&self.stamps_ns, self.period_s, t_ns)
+    /// The joint rule at ticks `tick_s` apart, see [`sample_at`].
+    pub fn sample_at(&self, t_ns: u64, tick_s: f64) -> ((usize, usize, f64), bool) {
+        sample_at(&self.stamps_ns, self.period_s, t_ns, tick_s)
     }
 }
 
@@ -86,12 +86,14 @@ pub(crate) fn frame_at(
 
 /// The joint rule: the bracket of `t_ns` in a joint stream (stamps ascending, nominal period
 /// `period_s`; the first sample when there is no bracket), and whether interpolating across it
-/// is sound — the samples around the tick at most ten periods (and 50 ms) apart, so no motion
-/// is invented across a hole.
+/// is sound — the samples around the tick at most [`max_hole_s`] apart, so no motion is
+/// invented across a hole. `tick_s` is the period of the ticks sampled (the dataset's or the
+/// controller's).
 pub(crate) fn sample_at(
     stamps_ns: &[u64],
     period_s: f64,
     t_ns: u64,
+    tick_s: f64,
 ) -> ((usize, usize, f64), bool) {
     let b = bracket(stamps_ns, t_ns);
     let gap_s = b.map_or(f64::INFINITY, |(i, k, _)| {
@@ -99,13 +101,21 @@ pub(crate) fn sample_at(
     });
     (
         b.unwrap_or((0, 0, 0.0)),
-        gap_s <= (MAX_GAP_PERIODS * period_s).max(MIN_MAX_GAP_S),
+        gap_s <= max_hole_s(period_s, tick_s),
     )
+}
+
+/// The widest hole (s) interpolated across in a joint stream of nominal period `period_s`
+/// sampled every `tick_s`: ten periods, 50 ms, or one tick, whichever is widest. A hole no
+/// wider than a tick hides no motion the ticks could resolve: a 1 kHz arm whose host stalls
+/// for 60 ms (a busy machine) still gives a sound 10 Hz sample, where 50 ms alone rejected it.
+pub fn max_hole_s(period_s: f64, tick_s: f64) -> f64 {
+    (MAX_GAP_PERIODS * period_s).max(MIN_MAX_GAP_S).max(tick_s)
 }
 
 /// Joint samples further apart than this many periods are not interpolated across…
 const MAX_GAP_PERIODS: f64 = 10.0;
-/// …unless they are at most this far apart (s).
+/// …unless they are at most this far apart (s) or one tick apart.
 const MIN_MAX_GAP_S: f64 = 0.05;
 
 /// Median interval between consecutive stamps (s).
@@ -230,17 +240,21 @@ pub fn align(
     let mut frames = Vec::with_capacity(n);
     let mut samples = Vec::with_capacity(n);
     let mut valid = Vec::with_capacity(n);
+    // Per tick, the streams (indices into `all`) that made it invalid: named in a rejection.
+    let mut blamed: Vec<Vec<usize>> = Vec::with_capacity(n);
     let (mut max_skew, mut max_age) = (0.0f64, 0.0f64);
     for k in 0..n {
         let t = start + (k as f64 * step_ns).round() as u64;
-        let mut ok = true;
+        let mut blame = Vec::new();
         let mut chosen = Vec::with_capacity(cameras.len());
         let (mut lo, mut hi) = (u64::MAX, 0);
-        for c in cameras {
+        for (ci, c) in cameras.iter().enumerate() {
             let (i, fresh) = c.frame_at(t, stale_periods);
             let s = c.stamps_ns[i];
             let age = t.saturating_sub(s) as f64 * 1e-9;
-            ok &= fresh;
+            if !fresh {
+                blame.push(ci);
+            }
             max_age = max_age.max(age);
             lo = lo.min(s);
             hi = hi.max(s);
@@ -250,15 +264,18 @@ pub fn align(
             max_skew = max_skew.max((hi - lo) as f64 * 1e-9);
         }
         let mut brackets = Vec::with_capacity(joints.len());
-        for j in joints {
-            let (b, sound) = j.sample_at(t);
-            ok &= sound;
+        for (ji, j) in joints.iter().enumerate() {
+            let (b, sound) = j.sample_at(t, step_ns * 1e-9);
+            if !sound {
+                blame.push(cameras.len() + ji);
+            }
             brackets.push(b);
         }
         ticks.push(t);
         frames.push(chosen);
         samples.push(brackets);
-        valid.push(ok);
+        valid.push(blame.is_empty());
+        blamed.push(blame);
     }
     let first = valid
         .iter()
@@ -272,8 +289,9 @@ pub fn align(
     }
     if invalid as f64 > max_invalid_fraction * kept as f64 {
         return Err(format!(
-            "{invalid} of {kept} ticks have a stale camera frame or a joint gap (limit {:.0} %)",
-            max_invalid_fraction * 100.0
+            "{invalid} of {kept} ticks have a stale camera frame or a joint gap (limit {:.0} %): {}",
+            max_invalid_fraction * 100.0,
+            blame_list(&all, &blamed[first..=last])
         ));
     }
     let streams = all.iter().map(|s| stream_report(s)).collect();
@@ -291,6 +309,21 @@ pub fn align(
             reordered: 0,
         },
     })
+}
+
+/// "topic N, topic M" — how many invalid ticks each stream made invalid, most first.
+fn blame_list(all: &[&Stream], blamed: &[Vec<usize>]) -> String {
+    let mut counts = vec![0usize; all.len()];
+    for &i in blamed.iter().flatten() {
+        counts[i] += 1;
+    }
+    let mut order: Vec<usize> = (0..all.len()).filter(|&i| counts[i] > 0).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(counts[i]));
+    order
+        .iter()
+        .map(|&i| format!("{} {}", all[i].topic, counts[i]))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The first tick: a quarter of the fastest camera's frame period after the latest camera's
@@ -339,117 +372,5 @@ fn stream_report(s: &Stream) -> StreamReport {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn grid(start_ms: u64, period_ms: f64, n: usize) -> Vec<u64> {
-        (0..n)
-            .map(|k| start_ms * 1_000_000 + (k as f64 * period_ms * 1e6) as u64)
-            .collect()
-    }
-
-    #[test]
-    fn latest_frame_and_interpolation() {
-        let cam = Stream::new("/cam", grid(0, 33.3, 31), Some(30.0));
-        let joints = Stream::new("/joints", grid(0, 1.0, 1001), Some(1000.0));
-        let a = align(
-            std::slice::from_ref(&cam),
-            std::slice::from_ref(&joints),
-            10.0,
-            1.5,
-            0.0,
-        )
-        .unwrap();
-        assert_eq!(a.report.ticks, 10);
-        for (k, t) in a.ticks_ns.iter().enumerate() {
-            let f = a.frames[k][0];
-            assert!(cam.stamps_ns[f] <= *t && *t - cam.stamps_ns[f] < 34_000_000);
-            let (i, j, w) = a.samples[k][0];
-            let interp = joints.stamps_ns[i] as f64 * (1.0 - w) + joints.stamps_ns[j] as f64 * w;
-            assert!((interp - *t as f64).abs() < 1.0);
-        }
-        assert_eq!(a.report.invalid, 0);
-    }
-
-    #[test]
-    fn synchronised_cameras_with_jitter_pick_the_same_capture() {
-        // Two 30 fps cameras triggered together, each stamp off by up to ±0.4 ms; both first
-        // stamps on the trigger, so a grid started there lies on the frame instants.
-        let jittered = |sign: i64| -> Vec<u64> {
-            grid(0, 100.0 / 3.0, 90)
-                .into_iter()
-                .enumerate()
-                .map(|(k, s)| {
-                    let j = sign * [0i64, 400_000, -300_000, 100_000, -400_000][k % 5];
-                    (s as i64 + 1_000_000 + j) as u64
-                })
-                .collect()
-        };
-        let cams = [
-            Stream::new("/a", jittered(1), Some(30.0)),
-            Stream::new("/b", jittered(-1), Some(30.0)),
-        ];
-        let joints = Stream::new("/joints", grid(0, 1.0, 3001), Some(1000.0));
-        let a = align(&cams, std::slice::from_ref(&joints), 10.0, 1.5, 0.0).unwrap();
-        assert!(a.report.ticks >= 28, "{}", a.report.ticks);
-        assert!(
-            a.report.max_camera_skew_s < 0.001,
-            "{} s",
-            a.report.max_camera_skew_s
-        );
-        // Every tick takes the same capture (index) from both cameras, a quarter frame (8.3 ms)
-        // old give or take the jitter.
-        for (t, f) in a.ticks_ns.iter().zip(&a.frames) {
-            assert_eq!(f[0], f[1]);
-            let age = t - cams[0].stamps_ns[f[0]];
-            assert!((7_900_000..=8_800_000).contains(&age), "{age} ns");
-        }
-    }
-
-    #[test]
-    fn stale_frames_invalidate_and_gaps_are_counted() {
-        let mut stamps = grid(0, 33.3, 61);
-        stamps.drain(20..30); // a third of a second without frames
-        let cam = Stream::new("/cam", stamps, Some(30.0));
-        let joints = Stream::new("/joints", grid(0, 1.0, 2001), Some(1000.0));
-        let e = align(
-            std::slice::from_ref(&cam),
-            std::slice::from_ref(&joints),
-            10.0,
-            1.5,
-            0.0,
-        )
-        .unwrap_err();
-        assert!(e.contains("stale camera frame"), "{e}");
-        let a = align(&[cam], &[joints], 10.0, 1.5, 0.2).unwrap();
-        assert!(a.report.invalid >= 2);
-        let cam_report = &a.report.streams[0];
-        assert_eq!((cam_report.gaps, cam_report.dropped), (1, 10));
-    }
-
-    #[test]
-    fn missing_streams_are_errors() {
-        let e = align(
-            &[Stream::new("/cam", vec![], Some(30.0))],
-            &[],
-            10.0,
-            1.5,
-            0.1,
-        )
-        .unwrap_err();
-        assert_eq!(e, "/cam has no messages");
-    }
-
-    #[test]
-    fn a_stamp_that_jumps_is_refused_before_allocating() {
-        let mut stamps = grid(0, 33.3, 30);
-        stamps.push(1_000_000_000_000_000_000); // 10^18 ns: ~32 years later
-        let cam = Stream::new("/cam", stamps.clone(), Some(30.0));
-        let joints = Stream::new("/joints", stamps, Some(30.0));
-        let e = align(&[cam], &[joints], 10.0, 1.5, 1.0).unwrap_err();
-        assert!(
-            e.contains("a stamp jumps") && e.contains("31 messages"),
-            "{e}"
-        );
-    }
-}
+#[path = "align_tests.rs"]
+mod tests;

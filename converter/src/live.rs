@@ -55,15 +55,17 @@ pub fn frame_at(
 /// The converter's joint rule at tick `t_ns`: positions (`positions[i]` stamped `stamps_ns[i]`,
 /// ascending; `period_s` the stream's nominal period, 1 / its rig `rate_hz`) linearly
 /// interpolated between the samples around the tick. `None` without a sample at or after the
-/// tick, or across a hole wider than ten periods (and 50 ms).
+/// tick, or across a hole wider than [`max_hole_s`](crate::align::max_hole_s) (ten periods,
+/// 50 ms or one tick of `tick_s`, whichever is widest).
 pub fn joints_at(
     stamps_ns: &[u64],
     positions: &[Vec<f64>],
     period_s: f64,
+    tick_s: f64,
     t_ns: u64,
 ) -> Option<Vec<f64>> {
     crate::align::bracket(stamps_ns, t_ns)?;
-    let ((i, j, w), sound) = crate::align::sample_at(stamps_ns, period_s, t_ns);
+    let ((i, j, w), sound) = crate::align::sample_at(stamps_ns, period_s, t_ns, tick_s);
     let (a, b) = (positions.get(i)?, positions.get(j)?);
     sound.then(|| crate::kinematics::lerp(a, b, w))
 }
@@ -211,11 +213,13 @@ mod tests {
         let first_joints = &ep.joints[..arm.joint_names.len()];
         let trimmed = (0..10)
             .find(|&k| {
-                joints_at(&arm_stamps, &arm_q, 1.0 / arm.rate_hz, tick(k)).is_some_and(|q| {
-                    q.iter()
-                        .zip(first_joints)
-                        .all(|(a, b)| (*a as f32 - b).abs() < 1e-7)
-                })
+                joints_at(&arm_stamps, &arm_q, 1.0 / arm.rate_hz, step * 1e-9, tick(k)).is_some_and(
+                    |q| {
+                        q.iter()
+                            .zip(first_joints)
+                            .all(|(a, b)| (*a as f32 - b).abs() < 1e-7)
+                    },
+                )
             })
             .expect("the first tick kept");
         let dim = ep.state_names.len();
@@ -224,8 +228,9 @@ mod tests {
         for k in 0..ep.len() {
             let t = tick(k + trimmed);
             // Joints and state.
-            let q = joints_at(&arm_stamps, &arm_q, 1.0 / arm.rate_hz, t).unwrap();
-            let g = joints_at(&grip_stamps, &grip_q, 1.0 / gripper.rate_hz, t).unwrap();
+            let q = joints_at(&arm_stamps, &arm_q, 1.0 / arm.rate_hz, step * 1e-9, t).unwrap();
+            let g =
+                joints_at(&grip_stamps, &grip_q, 1.0 / gripper.rate_hz, step * 1e-9, t).unwrap();
             let stored_joints = &ep.joints[k * joints..(k + 1) * joints];
             let live_joints: Vec<f32> = q.iter().chain(&g).map(|&x| x as f32).collect();
             assert!(
@@ -266,16 +271,23 @@ mod tests {
         assert_eq!(frame_at(&stamps, 0.033, 70_000_000, 1.5), Some((2, true)));
         assert_eq!(frame_at(&stamps, 0.033, 200_000_000, 1.5), Some((2, false)));
         assert_eq!(frame_at(&stamps, 0.033, 0, 1.5), Some((0, true)));
-        let js = [0, 1_000_000, 500_000_000];
-        let q = [vec![0.0], vec![1.0], vec![2.0]];
-        assert_eq!(joints_at(&js, &q, 0.001, 500_000), Some(vec![0.5]));
+        let js = [0, 1_000_000, 500_000_000, 580_000_000, 700_000_000];
+        let q = [vec![0.0], vec![1.0], vec![2.0], vec![3.0], vec![4.0]];
+        let tick = 0.1; // 10 Hz
+        assert_eq!(joints_at(&js, &q, 0.001, tick, 500_000), Some(vec![0.5]));
         assert_eq!(
-            joints_at(&js, &q, 0.001, 2_000_000),
+            joints_at(&js, &q, 0.001, tick, 2_000_000),
             None,
             "a hole of 499 ms"
         );
+        // An 80 ms hole of a 1 kHz stream: sound at 10 Hz ticks, not at 30 Hz (limit 50 ms).
         assert_eq!(
-            joints_at(&js, &q, 0.001, 600_000_000),
+            joints_at(&js, &q, 0.001, tick, 540_000_000),
+            Some(vec![2.5])
+        );
+        assert_eq!(joints_at(&js, &q, 0.001, 1.0 / 30.0, 540_000_000), None);
+        assert_eq!(
+            joints_at(&js, &q, 0.001, tick, 800_000_000),
             None,
             "nothing after the tick"
         );

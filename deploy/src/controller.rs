@@ -411,9 +411,10 @@ impl Controller {
                 .map_err(|e| format!("{}: {}", series.name, String::from(e)))?;
         }
         let mut state = Vec::with_capacity(7 * self.arms.len());
+        let tick_s = self.period_ns * 1e-9;
         for a in 0..self.arms.len() {
             let q = self.arms[a]
-                .at(obs_ns)
+                .at(obs_ns, tick_s)
                 .ok_or_else(|| format!("{}: no samples around the tick", self.arms[a].name))?;
             let base_from_tcp = self.kin[a]
                 .base_from_tcp(&q)
@@ -431,7 +432,7 @@ impl Controller {
             let width = match (&mut self.fingers[a], &self.grippers[a]) {
                 (Some(s), Some(g)) => {
                     let f = s
-                        .at(obs_ns)
+                        .at(obs_ns, tick_s)
                         .ok_or_else(|| format!("{}: no samples around the tick", s.name))?;
                     g.model.width_m(&f)
                 }

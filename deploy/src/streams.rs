@@ -52,10 +52,11 @@ impl Series {
             self.values.pop_front();
         }
     }
-    pub(crate) fn at(&mut self, t_ns: u64) -> Option<Vec<f64>> {
+    /// The converter's joint rule at `t_ns`, for ticks `tick_s` apart.
+    pub(crate) fn at(&mut self, t_ns: u64, tick_s: f64) -> Option<Vec<f64>> {
         let s = self.stamps.make_contiguous();
         let v = self.values.make_contiguous();
-        live::joints_at(s, v, self.period_s, t_ns)
+        live::joints_at(s, v, self.period_s, tick_s, t_ns)
     }
     pub(crate) fn silence(&self, now_ns: u64, opts: &ControlOptions) -> Option<String> {
         let limit = (opts.stale_periods * self.period_s).max(opts.min_silence_s);

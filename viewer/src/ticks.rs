@@ -136,7 +136,7 @@ fn quality(
             ok &= fresh;
         }
         for j in &joints {
-            ok &= j.sample_at(t).1;
+            ok &= j.sample_at(t, 1.0 / fps).1;
         }
         q.skew_s.push(if cams.is_empty() {
             0.0
