@@ -239,8 +239,7 @@ pub fn align(
     let mut ticks = Vec::with_capacity(n);
     let mut frames = Vec::with_capacity(n);
     let mut samples = Vec::with_capacity(n);
-    let mut valid = Vec::with_capacity(n);
-    // Per tick, the streams (indices into `all`) that made it invalid: named in a rejection.
+    // Per tick, the streams (indices into `all`) that made it invalid (none: a valid tick).
     let mut blamed: Vec<Vec<usize>> = Vec::with_capacity(n);
     let (mut max_skew, mut max_age) = (0.0f64, 0.0f64);
     for k in 0..n {
@@ -274,16 +273,18 @@ pub fn align(
         ticks.push(t);
         frames.push(chosen);
         samples.push(brackets);
-        valid.push(blame.is_empty());
         blamed.push(blame);
     }
-    let first = valid
+    let first = blamed
         .iter()
-        .position(|&v| v)
+        .position(|b| b.is_empty())
         .ok_or("no tick has fresh data from every stream")?;
-    let last = valid.iter().rposition(|&v| v).unwrap_or(first);
+    let last = blamed.iter().rposition(|b| b.is_empty()).unwrap_or(first);
     let kept = last - first + 1;
-    let invalid = valid[first..=last].iter().filter(|&&v| !v).count();
+    let invalid = blamed[first..=last]
+        .iter()
+        .filter(|b| !b.is_empty())
+        .count();
     if kept < 2 {
         return Err("fewer than 2 aligned ticks".into());
     }
