@@ -124,7 +124,63 @@ pub struct ModelConfig {
     /// and itself (the causal ablation, DP-T style).
     #[serde(default)]
     pub attention: Attention,
+    /// Which denoiser: ScaleDP's DiT (the default) or diffusion_policy's DP-T, the paper's
+    /// baseline.
+    #[serde(default)]
+    pub arch: Architecture,
+    /// Dropout while training: DP-T's `p_drop_attn` (its attention weights, residual branches
+    /// and FFN; 0.3 by default); ScaleDP has none (0). Never applied at inference.
+    #[serde(default)]
+    pub dropout: f64,
 }
+
+/// The denoiser's architecture.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Architecture {
+    /// ScaleDP: a DiT over the action tokens, adaLN-Zero conditioning on `t_emb + cond_emb`.
+    #[default]
+    ScaleDp,
+    /// DP-T: diffusion_policy's `TransformerForDiffusion`, pre-LN decoder layers with self-
+    /// attention over the action tokens and cross-attention to the diffusion step and each
+    /// observation step as condition tokens.
+    DpT,
+}
+
+impl Architecture {
+    /// `scaledp` or `dp-t`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Architecture::ScaleDp => "scaledp",
+            Architecture::DpT => "dp-t",
+        }
+    }
+}
+
+impl std::fmt::Display for Architecture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Architecture {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().replace(['-', '_'], "").as_str() {
+            "scaledp" => Ok(Architecture::ScaleDp),
+            "dpt" => Ok(Architecture::DpT),
+            _ => Err(Error::Config(format!(
+                "architecture {s:?}: scaledp or dp-t"
+            ))),
+        }
+    }
+}
+
+/// DP-T's defaults (diffusion_policy's hybrid image policy): 8 layers, 4 heads, width 256,
+/// attention dropout 0.3, causal masks.
+pub const DPT_DIMS: (usize, usize, usize) = (8, 256, 4);
+/// DP-T's `p_drop_attn`.
+pub const DPT_DROPOUT: f64 = 0.3;
 
 /// How uint8 pixels are scaled before the encoders.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -215,6 +271,40 @@ impl ModelConfig {
             feature_dim: 64,
             image_range: ImageRange::Symmetric,
             attention: Attention::NonCausal,
+            arch: Architecture::ScaleDp,
+            dropout: 0.0,
+        }
+    }
+
+    /// DP-T at its defaults ([`DPT_DIMS`], causal, dropout [`DPT_DROPOUT`]) on the same inputs
+    /// and encoders as [`ModelConfig::new`].
+    pub fn dp_t(
+        cameras: Vec<String>,
+        image: (u32, u32),
+        state_dim: usize,
+        action_dim: usize,
+    ) -> Self {
+        let (depth, hidden, heads) = DPT_DIMS;
+        ModelConfig {
+            size: None,
+            depth,
+            hidden,
+            heads,
+            attention: Attention::Causal,
+            arch: Architecture::DpT,
+            dropout: DPT_DROPOUT,
+            ..ModelConfig::new(ModelSize::Ti, cameras, image, state_dim, action_dim)
+        }
+    }
+
+    /// A name for the denoiser: `ScaleDP-ti`, `ScaleDP-custom`, `DP-T`.
+    pub fn denoiser_name(&self) -> String {
+        match self.arch {
+            Architecture::DpT => "DP-T".into(),
+            Architecture::ScaleDp => format!(
+                "ScaleDP-{}",
+                self.size.map_or("custom".into(), |s| s.to_string())
+            ),
         }
     }
 
@@ -235,7 +325,13 @@ impl ModelConfig {
 
     /// Condition width: (features · cameras + S) · To.
     pub fn cond_dim(&self) -> usize {
-        (self.feature_dim * self.cameras.len() + self.state_dim) * self.obs_horizon
+        self.obs_feature_dim() * self.obs_horizon
+    }
+
+    /// One observation step's features: features · cameras + S (DP-T's `cond_dim`, one
+    /// condition token per observation step).
+    pub fn obs_feature_dim(&self) -> usize {
+        self.feature_dim * self.cameras.len() + self.state_dim
     }
 
     /// The weight-name prefix of camera `i`'s encoder: `obs_encoder.<short name>`, the short name
@@ -257,6 +353,9 @@ impl ModelConfig {
         }
         if self.obs_horizon == 0 || self.action_chunk == 0 || self.action_dim == 0 {
             return bad("obs_horizon, action_chunk and the action width must be at least 1".into());
+        }
+        if !(0.0..1.0).contains(&self.dropout) {
+            return bad(format!("dropout {} outside [0, 1)", self.dropout));
         }
         if !(self.crop > 0.0 && self.crop <= 1.0) {
             return bad(format!("crop ratio {} outside (0, 1]", self.crop));

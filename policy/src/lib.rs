@@ -93,7 +93,10 @@ pub use checkpoint::{
     list as list_checkpoints, resolve as resolve_checkpoint, CheckpointConfig, Normalization,
     NormalizerConfig,
 };
-pub use config::{Attention, DiffusionConfig, ImageRange, ModelConfig, ModelSize};
+pub use config::{
+    Architecture, Attention, DiffusionConfig, ImageRange, ModelConfig, ModelSize, DPT_DIMS,
+    DPT_DROPOUT,
+};
 pub use error::{Error, Mismatch, Result};
 pub use image_chain::{ImageChain, StoredImages, TrainResize, DEFAULT_JPEG_QUALITY};
 pub use inference::{ddim_sample, ActionChunk, Observation, Policy};

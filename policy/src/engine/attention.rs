@@ -149,7 +149,7 @@ pub(crate) fn backward(a: AttnDims, qkv: &[f32], probs: &[f32], do_: &[f32], dqk
 /// element, which the compiler may not reorder into vector lanes (the attention's dot products
 /// ran at one element per add's latency).
 #[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
+pub(crate) fn dot(a: &[f32], b: &[f32]) -> f32 {
     let (ca, cb) = (a.chunks_exact(16), b.chunks_exact(16));
     let tail: f32 = ca
         .remainder()
@@ -168,7 +168,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 
 /// `y += a · x`.
 #[inline]
-fn axpy(y: &mut [f32], a: f32, x: &[f32]) {
+pub(crate) fn axpy(y: &mut [f32], a: f32, x: &[f32]) {
     for (y, x) in y.iter_mut().zip(x) {
         *y += a * x;
     }

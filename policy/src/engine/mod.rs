@@ -12,6 +12,7 @@
 
 pub(crate) mod attention;
 pub(crate) mod denoiser;
+pub(crate) mod dpt;
 pub(crate) mod encoder;
 pub(crate) mod ops;
 mod step;
@@ -65,7 +66,16 @@ impl InOut {
                 continue;
             }
             let &[out, inp] = t.dims() else { continue };
-            map.insert(name.clone(), transposed(out, inp, view.get(name)?));
+            let w = view.get(name)?;
+            map.insert(name.clone(), transposed(out, inp, w));
+            // DP-T's cross-attention projects queries and the memory's keys and values apart:
+            // copies of its query rows and of its key/value rows.
+            if name.ends_with("multihead_attn.in_proj_weight") && out == 3 * inp {
+                for (from, n) in [(0, inp), (inp, 2 * inp)] {
+                    let part = &w[from * inp..(from + n) * inp];
+                    map.insert(rows_key(name, from, n), transposed(n, inp, part));
+                }
+            }
         }
         Ok(InOut {
             of: weights.iter().map(|(_, t)| t.id()).collect(),
@@ -120,6 +130,25 @@ impl<'a> WeightView<'a> {
         }
     }
 
+    /// Rows `from .. from + n` of the `[out, in]` weight `name` as a Linear weight of `n` outputs
+    /// (its `[in, n]` copy when the view has one).
+    pub fn linear_rows(&self, name: &str, from: usize, n: usize) -> Result<ops::LinearWeight<'_>> {
+        if let Some(v) = self
+            .in_out
+            .and_then(|c| c.map.get(&rows_key(name, from, n)))
+        {
+            return Ok(ops::LinearWeight {
+                values: v,
+                in_out: true,
+            });
+        }
+        let inp = self.shape(name)?.get(1).copied().unwrap_or(1);
+        let w = self.get(name)?;
+        w.get(from * inp..(from + n) * inp)
+            .map(ops::LinearWeight::from)
+            .ok_or_else(|| Error::Config(format!("{name} has no rows {from}..{}", from + n)))
+    }
+
     /// Whether the model has a weight of that name.
     pub fn has(&self, name: &str) -> bool {
         self.entries.contains_key(name)
@@ -149,6 +178,11 @@ impl<'a> WeightView<'a> {
             .map(|(_, l)| l.dims().to_vec())
             .ok_or_else(|| Error::Config(format!("the model has no weight {name}")))
     }
+}
+
+/// The key of rows `from .. from + n` of weight `name` among [`InOut`]'s copies.
+fn rows_key(name: &str, from: usize, n: usize) -> String {
+    format!("{name}[{from}..{}]", from + n)
 }
 
 /// Gradients by parameter name, summed over every use (and micro-batch).

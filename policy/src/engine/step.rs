@@ -8,10 +8,11 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use scaledp_datasets::Batch;
 
-use super::{denoiser, encoder, Grads, InOut, WeightView};
-use crate::config::{Attention, ModelConfig};
+use super::{denoiser, dpt, encoder, Grads, InOut, WeightView};
+use crate::config::{Architecture, Attention, ModelConfig};
 use crate::error::{Error, Result};
 use crate::model::cpu::on_pool;
+use crate::model::dropout::Dropout;
 use crate::model::encoder::crop_values;
 use crate::model::params::randn;
 use crate::model::{Crop, ScaleDp};
@@ -23,6 +24,7 @@ use crate::trainer::{LossSpec, Phases};
 pub(crate) struct Engine {
     encoders: Vec<encoder::Work>,
     denoiser: denoiser::Work,
+    dpt: dpt::Work,
     /// The last condition `[b, cond_dim]` (its rows' camera features then state, per frame).
     cond: Vec<f32>,
     /// `[in, out]` copies of the Linear weights of the model [`Engine::sample`] last sampled.
@@ -49,6 +51,19 @@ fn shape(c: &ModelConfig) -> denoiser::Shape {
         action: c.action_dim,
         tokens: c.action_chunk,
         cond: c.cond_dim(),
+        causal: c.attention == Attention::Causal,
+    }
+}
+
+fn dpt_shape(c: &ModelConfig) -> dpt::Shape {
+    dpt::Shape {
+        layers: c.depth,
+        d: c.hidden,
+        heads: c.heads,
+        action: c.action_dim,
+        tokens: c.action_chunk,
+        obs_steps: c.obs_horizon,
+        obs_dim: c.obs_feature_dim(),
         causal: c.attention == Attention::Causal,
     }
 }
@@ -148,7 +163,7 @@ impl Engine {
     ) -> Result<(f32, Grads)> {
         on_pool(|| {
             let c = model.config().clone();
-            let sh = shape(&c);
+            let (sh, ds) = (shape(&c), dpt_shape(&c));
             let (b, a, ch, to, s) = (
                 batch.len,
                 c.action_dim,
@@ -193,9 +208,36 @@ impl Engine {
                     }
                 }
                 let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
-                denoiser::forward(&sh, &wv, &noisy, &tf, &self.cond, k, &mut self.denoiser)?;
+                let out = match c.arch {
+                    Architecture::ScaleDp => {
+                        denoiser::forward(
+                            &sh,
+                            &wv,
+                            &noisy,
+                            &tf,
+                            &self.cond,
+                            k,
+                            &mut self.denoiser,
+                        )?;
+                        &self.denoiser.out
+                    }
+                    Architecture::DpT => {
+                        // Dropout masks come after the noise, as the candle path draws them.
+                        let mut drop = Dropout::new(rng, c.dropout);
+                        dpt::forward(
+                            &ds,
+                            &wv,
+                            &noisy,
+                            &tf,
+                            &self.cond,
+                            k,
+                            &mut self.dpt,
+                            &mut drop,
+                        )?;
+                        &self.dpt.out
+                    }
+                };
                 // loss = Σ w (ε̂ − ε)² / denom; ∂loss/∂ε̂ = 2 w (ε̂ − ε) / denom.
-                let out = &self.denoiser.out;
                 let mut dout = vec![0f32; out.len()];
                 let mut sum = 0f64;
                 for (j, ((d, o), e)) in dout.iter_mut().zip(out).zip(&noise).enumerate() {
@@ -212,15 +254,20 @@ impl Engine {
                 let t2 = Instant::now();
                 phases.encode_s += (t1 - t0).as_secs_f64();
                 phases.denoise_s += (t2 - t1).as_secs_f64();
-                let dcond = denoiser::backward(
-                    &sh,
-                    &wv,
-                    &self.cond,
-                    k,
-                    &dout,
-                    &mut self.denoiser,
-                    &mut grads,
-                )?;
+                let dcond = match c.arch {
+                    Architecture::ScaleDp => denoiser::backward(
+                        &sh,
+                        &wv,
+                        &self.cond,
+                        k,
+                        &dout,
+                        &mut self.denoiser,
+                        &mut grads,
+                    )?,
+                    Architecture::DpT => {
+                        dpt::backward(&ds, &wv, &self.cond, &dout, &mut self.dpt, &mut grads)?
+                    }
+                };
                 self.encode_backward(model, &wv, &dcond, &mut grads)?;
                 phases.backward_s += t2.elapsed().as_secs_f64();
             }
@@ -263,13 +310,27 @@ impl Engine {
             let ts = scheduler.timesteps();
             let steps = ts.len();
             let t_all: Vec<f32> = (0..b).flat_map(|_| ts.iter().map(|&t| t as f32)).collect();
-            denoiser::condition(&sh, &wv, &t_all, &self.cond, steps, &mut self.denoiser)?;
-            let all = self.denoiser.take_modulation();
-            for (j, &t) in ts.iter().enumerate() {
-                let rows: Vec<usize> = (0..b).map(|i| i * steps + j).collect();
-                self.denoiser.set_modulation(&all, &rows);
-                denoiser::trunk(&sh, &wv, &x, &mut self.denoiser)?;
-                scheduler.step_values(&self.denoiser.out, t, &mut x)?;
+            let rows = |j: usize| -> Vec<usize> { (0..b).map(|i| i * steps + j).collect() };
+            match c.arch {
+                Architecture::ScaleDp => {
+                    denoiser::condition(&sh, &wv, &t_all, &self.cond, steps, &mut self.denoiser)?;
+                    let all = self.denoiser.take_modulation();
+                    for (j, &t) in ts.iter().enumerate() {
+                        self.denoiser.set_modulation(&all, &rows(j));
+                        denoiser::trunk(&sh, &wv, &x, &mut self.denoiser)?;
+                        scheduler.step_values(&self.denoiser.out, t, &mut x)?;
+                    }
+                }
+                Architecture::DpT => {
+                    let ds = dpt_shape(&c);
+                    dpt::condition(&ds, &wv, &t_all, &self.cond, steps, &mut self.dpt)?;
+                    let all = self.dpt.take_memory();
+                    for (j, &t) in ts.iter().enumerate() {
+                        self.dpt.set_memory(&all, &rows(j));
+                        dpt::trunk(&ds, &wv, &x, &mut self.dpt, &mut None)?;
+                        scheduler.step_values(&self.dpt.out, t, &mut x)?;
+                    }
+                }
             }
             Ok(x)
         })

@@ -6,7 +6,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::Engine;
-use crate::config::{Attention, ModelConfig, ModelSize};
+use crate::config::{Architecture, Attention, ModelConfig, ModelSize};
 use crate::inference::ddim_sample;
 use crate::model::{Crop, ScaleDp};
 use crate::scheduler::NoiseScheduler;
@@ -30,6 +30,13 @@ fn tiny(attention: Attention) -> ModelConfig {
     c
 }
 
+/// A tiny DP-T on the same inputs (3 layers, to reach a middle layer's every path).
+fn tiny_dpt(attention: Attention, dropout: f64) -> ModelConfig {
+    let mut c = tiny(attention);
+    (c.arch, c.depth, c.dropout) = (Architecture::DpT, 3, dropout);
+    c
+}
+
 fn max_rel(a: &Tensor, b: &Tensor) -> f32 {
     let d = (a - b)
         .and_then(|d| d.abs())
@@ -46,8 +53,8 @@ fn max_rel(a: &Tensor, b: &Tensor) -> f32 {
 }
 
 /// Loss and every gradient, engine vs autograd, for one configuration.
-fn compare(attention: Attention, spec: LossSpec, micro: Option<usize>) {
-    let cfg = tiny(attention);
+fn compare(cfg: ModelConfig, spec: LossSpec, micro: Option<usize>) {
+    let attention = cfg.attention;
     let dev = Device::Cpu;
     let (model, params) = ScaleDp::fresh(&cfg, 3, &dev).unwrap();
     // Random weights everywhere (the fresh adaLN-Zero init would zero most gradients).
@@ -119,7 +126,7 @@ fn compare(attention: Attention, spec: LossSpec, micro: Option<usize>) {
 
 #[test]
 fn loss_and_every_gradient_match_candles_autograd() {
-    compare(Attention::NonCausal, LossSpec::default(), None);
+    compare(tiny(Attention::NonCausal), LossSpec::default(), None);
 }
 
 #[test]
@@ -128,12 +135,47 @@ fn causal_masked_several_noise_draws_and_micro_batches_match_too() {
         noise_samples: 3,
         mask_padding: true,
     };
-    compare(Attention::Causal, spec, Some(2));
+    compare(tiny(Attention::Causal), spec, Some(2));
+}
+
+#[test]
+fn dpt_loss_and_every_gradient_match_candles_autograd() {
+    compare(tiny_dpt(Attention::Causal, 0.0), LossSpec::default(), None);
+}
+
+#[test]
+fn dpt_non_causal_several_noise_draws_and_micro_batches_match_too() {
+    let spec = LossSpec {
+        noise_samples: 2,
+        mask_padding: true,
+    };
+    compare(tiny_dpt(Attention::NonCausal, 0.0), spec, Some(3));
+}
+
+/// With dropout on, both paths draw the same masks in the same order from the step's generator:
+/// the same loss and gradients, which a mask applied in the wrong place would change.
+#[test]
+fn dpt_dropout_draws_the_same_masks_in_both_paths() {
+    let spec = LossSpec {
+        noise_samples: 2,
+        mask_padding: false,
+    };
+    compare(tiny_dpt(Attention::Causal, 0.3), spec, Some(3));
 }
 
 #[test]
 fn ddim_samples_match_the_candle_path() {
-    let cfg = tiny(Attention::NonCausal);
+    ddim_matches(tiny(Attention::NonCausal));
+}
+
+/// DP-T's samples too, and dropout (configured at 0.3) is off at inference: DDIM draws the
+/// noise and nothing else, so both paths agree.
+#[test]
+fn dpt_ddim_samples_match_the_candle_path() {
+    ddim_matches(tiny_dpt(Attention::Causal, 0.3));
+}
+
+fn ddim_matches(cfg: ModelConfig) {
     let dev = Device::Cpu;
     let model = ScaleDp::random(&cfg, 4, 0.2, &dev).unwrap();
     let mut sched = NoiseScheduler::new(100).unwrap();

@@ -5,6 +5,8 @@
 pub(crate) mod conv;
 pub(crate) mod cpu;
 pub(crate) mod denoiser;
+pub(crate) mod dpt;
+pub(crate) mod dropout;
 pub(crate) mod encoder;
 pub(crate) mod fused;
 pub(crate) mod params;
@@ -15,7 +17,7 @@ pub(crate) mod winograd;
 use candle_core::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 
-use crate::config::ModelConfig;
+use crate::config::{Architecture, Attention, ModelConfig};
 use crate::error::{Error, Result};
 pub use encoder::Crop;
 use encoder::{crop_images, ObsEncoder};
@@ -23,6 +25,9 @@ use params::{Builder, Param};
 
 pub use denoiser::timestep_embedding;
 use denoiser::{Denoiser, DenoiserDims};
+pub use dpt::sinusoidal_pos_emb;
+use dpt::{DpT, DpTDims};
+use dropout::Dropout;
 
 /// Parameter counts of a model, encoders and denoiser apart.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,12 +47,29 @@ impl ParamCounts {
     }
 }
 
-/// The network: encoders and denoiser.
+/// The denoiser of either architecture.
+#[derive(Clone, Debug)]
+enum Net {
+    ScaleDp(Denoiser),
+    DpT(DpT),
+}
+
+impl Net {
+    fn new(vb: &Builder, cfg: &ModelConfig) -> Result<Self> {
+        Ok(match cfg.arch {
+            Architecture::ScaleDp => Net::ScaleDp(Denoiser::new(vb, dims(cfg))?),
+            Architecture::DpT => Net::DpT(DpT::new(vb, dpt_dims(cfg))?),
+        })
+    }
+}
+
+/// The network: encoders and denoiser (ScaleDP's DiT, or DP-T for the paper's baseline; the
+/// encoders, condition and everything around them are the same).
 #[derive(Clone, Debug)]
 pub struct ScaleDp {
     cfg: ModelConfig,
     encoders: Vec<ObsEncoder>,
-    denoiser: Denoiser,
+    denoiser: Net,
     device: Device,
     weights: Vec<(String, Tensor)>,
 }
@@ -68,7 +90,7 @@ impl ScaleDp {
                 )
             })
             .collect::<Result<_>>()?;
-        let denoiser = Denoiser::new(vb, dims(cfg))?;
+        let denoiser = Net::new(vb, cfg)?;
         Ok(ScaleDp {
             cfg: cfg.clone(),
             encoders,
@@ -108,7 +130,9 @@ impl ScaleDp {
             .map(|p| {
                 let t = p.var.as_tensor();
                 let mut v = params::randn(&mut rng, t.elem_count());
-                let norm = p.name.contains(".bn") || p.name.contains("downsample.1");
+                let norm = [".bn", "downsample.1", ".norm", "ln_f."]
+                    .iter()
+                    .any(|n| p.name.contains(n));
                 for x in &mut v {
                     *x *= std as f32;
                     if norm && p.name.ends_with("weight") {
@@ -156,7 +180,7 @@ impl ScaleDp {
     pub fn count(cfg: &ModelConfig) -> Result<ParamCounts> {
         cfg.validate()?;
         let vb = Builder::shapes();
-        Denoiser::new(&vb, dims(cfg))?;
+        Net::new(&vb, cfg)?;
         let denoiser = vb.finish()?.1;
         let encoder_per_camera = if cfg.cameras.is_empty() {
             0
@@ -228,18 +252,53 @@ impl ScaleDp {
     /// ε̂ for noisy actions `x` `[B, C, A]` at timesteps `t` (one per sample) under `cond`.
     pub fn predict_noise(&self, x: &Tensor, t: &[f32], cond: &Tensor) -> Result<Tensor> {
         let c = self.condition(t, cond)?;
-        self.denoiser.forward(x, &c)
+        self.denoise(x, &c)
     }
 
-    /// The adaLN condition `t_emb + cond_emb` (computed once per DDIM step).
+    /// [`ScaleDp::predict_noise`] in training: with the model's dropout (DP-T), its masks
+    /// drawn from `rng` in the order the CPU engine draws them.
+    pub(crate) fn predict_noise_train(
+        &self,
+        x: &Tensor,
+        t: &[f32],
+        cond: &Tensor,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Tensor> {
+        let c = self.condition(t, cond)?;
+        match &self.denoiser {
+            Net::ScaleDp(d) => d.forward(x, &c),
+            Net::DpT(d) => d.forward(x, &c, &mut Dropout::new(rng, self.cfg.dropout)),
+        }
+    }
+
+    /// What the denoiser computes once per DDIM step from the timesteps and the condition:
+    /// ScaleDP's adaLN condition `t_emb + cond_emb` `[B, d]`, DP-T's memory `[B, 1 + To, d]`.
     pub(crate) fn condition(&self, t: &[f32], cond: &Tensor) -> Result<Tensor> {
-        let tf = timestep_embedding(t, &self.device)?;
-        self.denoiser.condition(&tf, cond)
+        match &self.denoiser {
+            Net::ScaleDp(d) => d.condition(&timestep_embedding(t, &self.device)?, cond),
+            Net::DpT(d) => d.memory(t, cond),
+        }
     }
 
-    /// ε̂ under a precomputed condition.
+    /// ε̂ under a precomputed condition (no dropout: inference).
     pub(crate) fn denoise(&self, x: &Tensor, c: &Tensor) -> Result<Tensor> {
-        self.denoiser.forward(x, c)
+        match &self.denoiser {
+            Net::ScaleDp(d) => d.forward(x, c),
+            Net::DpT(d) => d.forward(x, c, &mut None),
+        }
+    }
+}
+
+fn dpt_dims(cfg: &ModelConfig) -> DpTDims {
+    DpTDims {
+        layers: cfg.depth,
+        d: cfg.hidden,
+        heads: cfg.heads,
+        action_dim: cfg.action_dim,
+        horizon: cfg.action_chunk,
+        obs_steps: cfg.obs_horizon,
+        obs_dim: cfg.obs_feature_dim(),
+        causal: cfg.attention == Attention::Causal,
     }
 }
 
@@ -252,7 +311,7 @@ fn dims(cfg: &ModelConfig) -> DenoiserDims {
         action_dim: cfg.action_dim,
         action_chunk: cfg.action_chunk,
         cond_dim: cfg.cond_dim(),
-        causal: cfg.attention == crate::config::Attention::Causal,
+        causal: cfg.attention == Attention::Causal,
     }
 }
 

@@ -10,7 +10,7 @@ use scaledp_datasets::Loader;
 
 use super::{open_loaders, optim::AdamW, TrainOptions, Trainer};
 use crate::checkpoint::{self, CheckpointConfig, Normalization, NormalizerConfig};
-use crate::config::{DiffusionConfig, ModelConfig};
+use crate::config::{Architecture, DiffusionConfig, ModelConfig};
 use crate::error::{Error, Result};
 use crate::image_chain::{ImageChain, StoredImages, TrainResize};
 use crate::model::params::Param;
@@ -109,13 +109,19 @@ pub(super) fn config_for(
     o: &TrainOptions,
 ) -> Result<CheckpointConfig> {
     let info = loader.info();
-    let mut model = ModelConfig::new(
-        o.size,
+    let inputs = (
         info.cameras.clone(),
         (info.width, info.height),
         info.state_names.len(),
         info.action_names.len(),
     );
+    let mut model = match o.arch {
+        Architecture::ScaleDp => ModelConfig::new(o.size, inputs.0, inputs.1, inputs.2, inputs.3),
+        Architecture::DpT => ModelConfig::dp_t(inputs.0, inputs.1, inputs.2, inputs.3),
+    };
+    if let Some(p) = o.dropout {
+        model.dropout = p;
+    }
     if let Some((depth, hidden, heads)) = o.denoiser {
         model.size = None;
         model.depth = depth;

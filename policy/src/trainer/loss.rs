@@ -189,7 +189,7 @@ fn micro_loss(
     let noise = Tensor::from_vec(randn(rng, m * ch * a), (m, ch, a), dev)?;
     let noisy = scheduler.add_noise(&x0, &noise, &t)?;
     let tf: Vec<f32> = t.iter().map(|&v| v as f32).collect();
-    let eps = model.predict_noise(&noisy, &tf, &cond)?;
+    let eps = model.predict_noise_train(&noisy, &tf, &cond, rng)?;
     let mut se = (eps - noise)?.sqr()?;
     if spec.mask_padding {
         let mask: Vec<f32> = batch.action_is_pad[s0 * ch..(s0 + n) * ch]

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Attention, ImageRange, ModelSize};
+use crate::config::{Architecture, Attention, ImageRange, ModelSize, DPT_DIMS};
 use crate::trainer::loss::LossSpec;
 use crate::trainer::optim::{AdamWConfig, EmaConfig};
 
@@ -79,6 +79,11 @@ pub struct TrainOptions {
     pub(crate) image_range: ImageRange,
     #[serde(default)]
     pub(crate) attention: Attention,
+    #[serde(default)]
+    pub(crate) arch: Architecture,
+    /// Dropout instead of the architecture's (DP-T 0.3, ScaleDP none).
+    #[serde(default)]
+    pub(crate) dropout: Option<f64>,
 }
 
 impl Default for TrainOptions {
@@ -111,6 +116,8 @@ impl Default for TrainOptions {
             state_norm: StateNorm::MinMax,
             image_range: ImageRange::Symmetric,
             attention: Attention::NonCausal,
+            arch: Architecture::ScaleDp,
+            dropout: None,
         }
     }
 }
@@ -255,9 +262,25 @@ impl TrainOptions {
         self.image_range = range;
         self
     }
-    /// The denoiser's attention (default non-causal; causal for the ablation).
+    /// The denoiser's attention (default non-causal for ScaleDP, causal for DP-T).
     pub fn attention(mut self, attention: Attention) -> Self {
         self.attention = attention;
+        self
+    }
+    /// The denoiser's architecture (default ScaleDP); also sets the attention to the
+    /// architecture's default (ScaleDP non-causal, DP-T causal), so call
+    /// [`TrainOptions::attention`] after it for an ablation.
+    pub fn arch(mut self, arch: Architecture) -> Self {
+        self.arch = arch;
+        self.attention = match arch {
+            Architecture::ScaleDp => Attention::NonCausal,
+            Architecture::DpT => Attention::Causal,
+        };
+        self
+    }
+    /// Dropout while training, instead of the architecture's (DP-T 0.3; ScaleDP has none).
+    pub fn dropout(mut self, p: f64) -> Self {
+        self.dropout = Some(p);
         self
     }
 
@@ -268,6 +291,17 @@ impl TrainOptions {
     /// The model size.
     pub fn get_model(&self) -> ModelSize {
         self.size
+    }
+    /// The architecture.
+    pub fn get_arch(&self) -> Architecture {
+        self.arch
+    }
+    /// The denoiser's (depth, width, heads): set by hand, else the architecture's or the size's.
+    pub fn get_denoiser(&self) -> (usize, usize, usize) {
+        self.denoiser.unwrap_or(match self.arch {
+            Architecture::ScaleDp => self.size.dims(),
+            Architecture::DpT => DPT_DIMS,
+        })
     }
     /// AdamW's settings.
     pub fn get_adamw(&self) -> AdamWConfig {

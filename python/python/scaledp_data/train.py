@@ -67,15 +67,16 @@ def print_counts(what: str, m: Dict[str, Any]) -> None:
     """Parameter counts, encoders and denoiser apart (as ``scaledp train --dry-run``)."""
     import torch
 
-    from .policy.model import ScaleDPPolicy, crop_size
+    from .policy.model import build_policy, crop_size
 
     with torch.device("meta"):
-        policy = ScaleDPPolicy(m)
+        policy = build_policy(m)
     enc = sum(p.numel() for n, p in policy.named_parameters() if n.startswith("obs_encoder."))
     den = sum(p.numel() for n, p in policy.named_parameters() if not n.startswith("obs_encoder."))
     cams = len(m["cameras"])
     cw, ch = crop_size(m)
-    print(f"{what}: ScaleDP-{m['size'] or 'custom'} (depth {m['depth']}, width {m['hidden']}, "
+    name = "DP-T" if m.get("arch") == "dp_t" else f"ScaleDP-{m['size'] or 'custom'}"
+    print(f"{what}: {name} (depth {m['depth']}, width {m['hidden']}, "
           f"heads {m['heads']}), {cams} cameras {m['image_width']}x{m['image_height']} cropped to "
           f"{cw}x{ch}, state {m['state_dim']}, action {m['action_dim']}, To {m['obs_horizon']}, "
           f"C {m['action_chunk']}")

@@ -7,7 +7,7 @@ use std::sync::atomic::Ordering;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use scaledp_policy::model::ScaleDp;
-use scaledp_policy::{Event, ModelConfig, StateNorm, TrainOptions, Trainer};
+use scaledp_policy::{Architecture, Event, ModelConfig, StateNorm, TrainOptions, Trainer};
 
 use crate::cli::ExitStatus;
 use crate::shared;
@@ -23,9 +23,23 @@ pub struct TrainArgs {
     /// three hours on two CPU cores); the flags below override it one by one.
     #[arg(long)]
     pub preset: Option<String>,
-    /// Model size: ti, s, b, l or h [ti].
+    /// Model: a ScaleDP size (ti, s, b, l or h) or dp-t, the paper's baseline
+    /// (diffusion_policy's transformer: 8 layers, width 256, 4 heads, causal masks, dropout
+    /// 0.3) [ti].
     #[arg(long)]
     pub model: Option<String>,
+    /// Denoiser depth instead of the model's (the DP-T depth ablation: 8, 12, 14).
+    #[arg(long)]
+    pub layers: Option<usize>,
+    /// Denoiser width instead of the model's.
+    #[arg(long)]
+    pub width: Option<usize>,
+    /// Attention heads instead of the model's.
+    #[arg(long)]
+    pub heads: Option<usize>,
+    /// Dropout while training [DP-T 0.3; ScaleDP none].
+    #[arg(long)]
+    pub dropout: Option<f64>,
     /// Run directory (metrics.jsonl, checkpoints/step_*).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -87,8 +101,8 @@ pub struct TrainArgs {
     /// the denoiser this many times [1].
     #[arg(long)]
     pub noise_samples: Option<usize>,
-    /// The denoiser's attention over the action chunk: non-causal (ScaleDP) or causal (the
-    /// DP-T-style ablation) [non-causal].
+    /// The denoiser's attention over the action chunk: non-causal or causal [ScaleDP:
+    /// non-causal; DP-T: causal, its own masks].
     #[arg(long)]
     pub attention: Option<String>,
     /// Leave action steps past an episode's end out of the loss (by default they are trained
@@ -135,7 +149,20 @@ pub fn options(a: &TrainArgs) -> Result<TrainOptions> {
         None => TrainOptions::default(),
     };
     if let Some(m) = &a.model {
-        o = o.model(m.parse()?);
+        o = match m.parse::<Architecture>() {
+            Ok(Architecture::DpT) => o.arch(Architecture::DpT),
+            _ => o.arch(Architecture::ScaleDp).model(m.parse().map_err(|_| {
+                anyhow::anyhow!("--model {m}: one of ti, s, b, l, h (ScaleDP) or dp-t")
+            })?),
+        };
+    }
+    if a.layers.is_some() || a.width.is_some() || a.heads.is_some() {
+        let (d, w, h) = o.get_denoiser();
+        o = o.denoiser(
+            a.layers.unwrap_or(d),
+            a.width.unwrap_or(w),
+            a.heads.unwrap_or(h),
+        );
     }
     macro_rules! set {
         ($($field:ident),*) => {$(
@@ -161,7 +188,8 @@ pub fn options(a: &TrainArgs) -> Result<TrainOptions> {
         obs_horizon,
         action_chunk,
         resnet_width,
-        noise_samples
+        noise_samples,
+        dropout
     );
     if let Some(s) = &a.image_size {
         let (w, h) = size(s)?;
@@ -197,9 +225,9 @@ fn print_counts(what: &str, cfg: &ModelConfig) -> Result<()> {
     let n = ScaleDp::count(cfg)?;
     let (cw, ch) = cfg.crop_size();
     println!(
-        "{what}: ScaleDP-{} (depth {}, width {}, heads {}), {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}",
-        cfg.size.map_or("custom".into(), |s| s.to_string()),
-        cfg.depth, cfg.hidden, cfg.heads, cfg.cameras.len(), cfg.image_width, cfg.image_height,
+        "{what}: {} (depth {}, width {}, heads {}, {} attention), {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}",
+        cfg.denoiser_name(),
+        cfg.depth, cfg.hidden, cfg.heads, cfg.attention, cfg.cameras.len(), cfg.image_width, cfg.image_height,
         cfg.state_dim, cfg.action_dim, cfg.obs_horizon, cfg.action_chunk
     );
     println!(
@@ -231,6 +259,22 @@ pub fn run(a: TrainArgs) -> Result<ExitStatus> {
         (Some(run), _) => Trainer::resume(run, a.steps, &dev)?,
         (None, None) if a.dry_run => {
             let mut cfg = ModelConfig::paper(model);
+            if opts.get_arch() == Architecture::DpT {
+                let p = ModelConfig::paper(model);
+                cfg = ModelConfig::dp_t(
+                    p.cameras,
+                    (p.image_width, p.image_height),
+                    p.state_dim,
+                    p.action_dim,
+                );
+            }
+            let (depth, hidden, heads) = opts.get_denoiser();
+            if (depth, hidden, heads) != (cfg.depth, cfg.hidden, cfg.heads) {
+                (cfg.size, cfg.depth, cfg.hidden, cfg.heads) = (None, depth, hidden, heads);
+            }
+            if let Some(at) = &a.attention {
+                cfg.attention = at.parse()?;
+            }
             cfg.obs_horizon = a.obs_horizon.unwrap_or(cfg.obs_horizon);
             cfg.action_chunk = a.action_chunk.unwrap_or(cfg.action_chunk);
             print_counts("paper setup (3 cameras, 14-D state and action)", &cfg)?;

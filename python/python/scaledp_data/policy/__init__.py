@@ -1,4 +1,4 @@
-"""The ScaleDP policy in PyTorch (needs torch and safetensors: ``pip install
+"""The ScaleDP policy (and DP-T, the paper's baseline) in PyTorch (needs torch and safetensors: ``pip install
 scaledp-data[torch]``): the same network, noise schedule, loss and checkpoint format as the Rust
 policy (``scaledp train`` / ``serve`` / ``eval``), so a checkpoint moves freely between the two.
 
@@ -15,7 +15,8 @@ policy (``scaledp train`` / ``serve`` / ``eval``), so a checkpoint moves freely 
 
 from .checkpoint import read_config, resolve
 from .diffusion import DenoisingLoss, Draws, NoiseScheduler, ddim_sample, loss_terms
-from .model import ScaleDPPolicy, camera_short_name, crop_size
+from .dpt import DPTPolicy
+from .model import ImagePolicy, ScaleDPPolicy, build_policy, camera_short_name, crop_size
 
-__all__ = ["ScaleDPPolicy", "NoiseScheduler", "ddim_sample", "Draws", "DenoisingLoss",
+__all__ = ["ScaleDPPolicy", "DPTPolicy", "ImagePolicy", "build_policy", "NoiseScheduler", "ddim_sample", "Draws", "DenoisingLoss",
            "loss_terms", "crop_size", "camera_short_name", "read_config", "resolve"]

@@ -22,7 +22,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import torch
 
-from .options import MODEL_SIZES
+from .options import DPT_DIMS, DPT_DROPOUT, MODEL_SIZES
 
 __all__ = ["FORMAT", "VERSION", "model_config", "checkpoint_config", "write", "list_checkpoints",
            "resolve", "read_config", "read_train_state"]
@@ -36,8 +36,15 @@ CONFIG_FILE = "config.json"
 
 def model_config(info: Dict[str, Any], o: Dict[str, Any]) -> Dict[str, Any]:
     """The ``ModelConfig`` a run with options ``o`` gets on a loader whose ``info`` this is."""
-    depth, hidden, heads = MODEL_SIZES[o["size"]]
-    size: Optional[str] = o["size"]
+    arch = o.get("arch", "scale_dp")
+    if arch == "dp_t":
+        size: Optional[str] = None
+        (depth, hidden, heads), dropout = DPT_DIMS, DPT_DROPOUT
+    else:
+        size = o["size"]
+        (depth, hidden, heads), dropout = MODEL_SIZES[o["size"]], 0.0
+    if o.get("dropout") is not None:
+        dropout = float(o["dropout"])
     if o.get("denoiser"):
         size, (depth, hidden, heads) = None, o["denoiser"]
     w, h = info["image_size"]
@@ -48,6 +55,7 @@ def model_config(info: Dict[str, Any], o: Dict[str, Any]) -> Dict[str, Any]:
         "cameras": list(info["cameras"]), "image_width": w, "image_height": h,
         "crop": o["crop"], "resnet_width": o["resnet_width"], "keypoints": 32,
         "feature_dim": 64, "image_range": o["image_range"], "attention": o["attention"],
+        "arch": arch, "dropout": dropout,
     }
     validate_model(m)
     return m
@@ -62,6 +70,8 @@ def validate_model(m: Dict[str, Any]) -> None:
                          f"{m['heads']} heads (depth {m['depth']})")
     if min(m["obs_horizon"], m["action_chunk"], m["action_dim"]) < 1:
         raise ValueError("obs_horizon, action_chunk and the action width must be at least 1")
+    if not 0.0 <= m.get("dropout", 0.0) < 1.0:
+        raise ValueError(f"dropout {m['dropout']} outside [0, 1)")
     if not 0.0 < m["crop"] <= 1.0:
         raise ValueError(f"crop ratio {m['crop']} outside (0, 1]")
     if m["cameras"]:
@@ -196,10 +206,14 @@ def resolve(path: str) -> str:
 
 
 def read_config(ckpt: str) -> Dict[str, Any]:
-    """``ckpt/config.json``, checked for its format and version."""
+    """``ckpt/config.json``, checked for its format and version (fields written before they
+    existed take the values those checkpoints meant)."""
     path = os.path.join(ckpt, CONFIG_FILE)
     with open(path) as f:
         cfg = json.load(f)
+    if isinstance(cfg.get("model"), dict):
+        cfg["model"].setdefault("arch", "scale_dp")
+        cfg["model"].setdefault("dropout", 0.0)
     if cfg.get("format") != FORMAT:
         raise ValueError(f"{path}: format {cfg.get('format')!r}, not a {FORMAT} checkpoint")
     if cfg.get("version") != VERSION:

@@ -22,7 +22,7 @@ from typing import Optional
 import torch
 import torch.nn as nn
 
-from .model import ScaleDPPolicy, crop_size
+from .model import ImagePolicy, crop_size
 
 __all__ = ["NoiseScheduler", "Draws", "DenoisingLoss", "ddim_sample", "loss_terms"]
 
@@ -77,7 +77,7 @@ class NoiseScheduler:
 
 
 @torch.no_grad()
-def ddim_sample(policy: ScaleDPPolicy, scheduler: NoiseScheduler, cond: torch.Tensor,
+def ddim_sample(policy: ImagePolicy, scheduler: NoiseScheduler, cond: torch.Tensor,
                 noise: Optional[torch.Tensor] = None,
                 generator: Optional[torch.Generator] = None) -> torch.Tensor:
     """Normalized action chunks ``[B, C, A]`` for conditions ``cond`` ``[B, cond_dim]``: from
@@ -136,11 +136,11 @@ def loss_terms(action_is_pad: torch.Tensor, action_dim: int, noise_samples: int,
 
 
 class DenoisingLoss(nn.Module):
-    """The training objective around a :class:`ScaleDPPolicy` (what DDP wraps): the observation
+    """The training objective around a :class:`ImagePolicy` (what DDP wraps): the observation
     encoded once per sample, ``K`` (timestep, noise) draws per encoding, the summed squared
     error of the predicted noise over every action step (or the unpadded ones)."""
 
-    def __init__(self, policy: ScaleDPPolicy, scheduler: NoiseScheduler, mask_padding: bool = False):
+    def __init__(self, policy: ImagePolicy, scheduler: NoiseScheduler, mask_padding: bool = False):
         super().__init__()
         self.policy = policy
         self.mask_padding = mask_padding

@@ -28,7 +28,8 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-__all__ = ["ScaleDPPolicy", "crop_size", "camera_short_name", "timestep_embedding"]
+__all__ = ["ImagePolicy", "ScaleDPPolicy", "build_policy", "policy_class", "crop_size",
+           "camera_short_name", "timestep_embedding"]
 
 #: Width of the sinusoidal timestep embedding.
 FREQ_DIM = 256
@@ -244,94 +245,61 @@ class FinalLayer(nn.Module):
         return self.linear(modulate(_ln(x), shift, scale))
 
 
-class ScaleDPPolicy(nn.Module):
-    """Encoders under ``obs_encoder.<camera>``, the denoiser's modules at the top level.
-
-    ``cfg`` is the ``model`` object of a checkpoint's ``config.json`` (the Rust
-    ``ModelConfig``). A fresh module is initialised as DiT (adaLN-Zero: the untrained denoiser
-    outputs exactly 0) and the trunks as torchvision.
-    """
+class ImagePolicy(nn.Module):
+    """What every architecture shares: one encoder per camera under ``obs_encoder.<camera>``
+    and the condition they make with the normalized state. ``cfg`` is the ``model`` object of a
+    checkpoint's ``config.json`` (the Rust ``ModelConfig``); subclasses add the denoiser and
+    ``condition`` / ``denoise``."""
 
     def __init__(self, cfg: Dict[str, Any]):
         super().__init__()
         self.cfg = dict(cfg)
-        d, a, c = cfg["hidden"], cfg["action_dim"], cfg["action_chunk"]
         self.obs_encoder = nn.ModuleDict({
             camera_short_name(k): ObsEncoder(cfg["resnet_width"], cfg["keypoints"], cfg["feature_dim"])
             for k in cfg["cameras"]
         })
         if len(self.obs_encoder) != len(cfg["cameras"]):
             raise ValueError(f"cameras {cfg['cameras']} share a weight prefix")
-        self.x_embedder = nn.Linear(a, d)
-        self.pos_embed = nn.Parameter(torch.zeros(1, c, d))
-        self.t_embedder = TimestepEmbedder(d)
-        self.cond_obs_emb = nn.Linear(self.cond_dim, d)
-        causal = cfg.get("attention", "non_causal") == "causal"
-        self.blocks = nn.ModuleList(
-            [Block(d, cfg["heads"], cfg["mlp_ratio"], causal) for _ in range(cfg["depth"])])
-        self.final_layer = FinalLayer(d, a)
         # Checkpoints written before `image_range` existed saw pixels in [0, 1].
         self.register_buffer("pixels", pixel_table(cfg.get("image_range", "unit")), persistent=False)
-        self.initialize()
+
+    def initialize_encoders(self, generator: Optional[torch.Generator] = None) -> None:
+        """torchvision's initialisation of the trunks (kaiming-normal fan-out convolutions,
+        GroupNorm 1 / 0); PyTorch's defaults for the keypoint conv and the encoder Linear."""
+        g = generator
+        with torch.no_grad():
+            for name, m in self.obs_encoder.named_modules():
+                if isinstance(m, nn.Conv2d) and ".backbone." in f".{name}.":
+                    std = math.sqrt(2.0 / (m.out_channels * m.kernel_size[0] * m.kernel_size[1]))
+                    m.weight.copy_(torch.randn(m.weight.shape, generator=g) * std)
+                elif isinstance(m, nn.GroupNorm):
+                    m.weight.fill_(1.0)
+                    m.bias.fill_(0.0)
+                elif isinstance(m, (nn.Conv2d, nn.Linear)):
+                    fan_in = m.weight[0].numel()
+                    bound = 1.0 / math.sqrt(fan_in)
+                    m.weight.copy_(torch.rand(m.weight.shape, generator=g) * 2 * bound - bound)
+                    m.bias.copy_(torch.rand(m.bias.shape, generator=g) * 2 * bound - bound)
+
+    @classmethod
+    def from_checkpoint(cls, path: str, weights: str = "model.safetensors",
+                        device: Any = "cpu") -> "ImagePolicy":
+        """The module of checkpoint directory ``path`` (its ``config.json``: ScaleDP or DP-T,
+        whichever class this is called on) with the weights of ``weights`` there (the EMA
+        weights by default), in eval mode."""
+        from safetensors.torch import load_file
+
+        with open(os.path.join(path, "config.json")) as f:
+            cfg = json.load(f)
+        policy = build_policy(cfg["model"])
+        policy.load_state_dict(load_file(os.path.join(path, weights)), strict=True)
+        return policy.to(device).eval()
 
     @property
     def cond_dim(self) -> int:
         """Condition width: (features x cameras + S) x To."""
         c = self.cfg
         return (c["feature_dim"] * len(c["cameras"]) + c["state_dim"]) * c["obs_horizon"]
-
-    def initialize(self, generator: Optional[torch.Generator] = None) -> None:
-        """DiT's initialisation of the denoiser (xavier-uniform linears, zero biases, N(0, 0.02)
-        for ``pos_embed``, ``cond_obs_emb`` and the timestep MLP, every adaLN linear and the
-        final linear zeroed); torchvision's of the trunks (kaiming-normal fan-out convolutions,
-        GroupNorm 1 / 0); PyTorch's defaults for the keypoint conv and the encoder Linear."""
-        g = generator
-
-        def normal(t: torch.Tensor, std: float) -> None:
-            with torch.no_grad():
-                t.copy_(torch.randn(t.shape, generator=g) * std)
-
-        with torch.no_grad():
-            for name, m in self.named_modules():
-                if name.startswith("obs_encoder"):
-                    if isinstance(m, nn.Conv2d) and ".backbone." in f".{name}.":
-                        std = math.sqrt(2.0 / (m.out_channels * m.kernel_size[0] * m.kernel_size[1]))
-                        normal(m.weight, std)
-                    elif isinstance(m, nn.GroupNorm):
-                        m.weight.fill_(1.0)
-                        m.bias.fill_(0.0)
-                    elif isinstance(m, (nn.Conv2d, nn.Linear)):
-                        fan_in = m.weight[0].numel()
-                        bound = 1.0 / math.sqrt(fan_in)
-                        m.weight.copy_(torch.rand(m.weight.shape, generator=g) * 2 * bound - bound)
-                        m.bias.copy_(torch.rand(m.bias.shape, generator=g) * 2 * bound - bound)
-                elif isinstance(m, nn.Linear):
-                    bound = math.sqrt(6.0 / (m.in_features + m.out_features))
-                    m.weight.copy_(torch.rand(m.weight.shape, generator=g) * 2 * bound - bound)
-                    m.bias.zero_()
-            normal(self.pos_embed, 0.02)
-            for lin in (self.cond_obs_emb, self.t_embedder.mlp[0], self.t_embedder.mlp[2]):
-                normal(lin.weight, 0.02)
-            for blk in self.blocks:
-                blk.adaLN_modulation[1].weight.zero_()
-                blk.adaLN_modulation[1].bias.zero_()
-            self.final_layer.adaLN_modulation[1].weight.zero_()
-            self.final_layer.adaLN_modulation[1].bias.zero_()
-            self.final_layer.linear.weight.zero_()
-            self.final_layer.linear.bias.zero_()
-
-    @classmethod
-    def from_checkpoint(cls, path: str, weights: str = "model.safetensors",
-                        device: Any = "cpu") -> ScaleDPPolicy:
-        """The module of checkpoint directory ``path`` (its ``config.json``) with the weights of
-        ``weights`` there (the EMA weights by default)."""
-        from safetensors.torch import load_file
-
-        with open(os.path.join(path, "config.json")) as f:
-            cfg = json.load(f)
-        policy = cls(cfg["model"])
-        policy.load_state_dict(load_file(os.path.join(path, weights)), strict=True)
-        return policy.to(device)
 
     def crop(self, images: torch.Tensor, offsets: Optional[torch.Tensor] = None) -> torch.Tensor:
         """uint8 ``[N, 3, H, W]`` -> float ``[N, 3, h, w]`` in the model's pixel range: the
@@ -366,6 +334,66 @@ class ScaleDPPolicy(nn.Module):
         return torch.cat(feats, dim=1).reshape(b, -1)
 
     def condition(self, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """What the denoiser computes once per DDIM step from the timesteps and the condition."""
+        raise NotImplementedError
+
+    def denoise(self, x: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+        """The predicted noise of ``x`` ``[B, C, A]`` under a precomputed condition."""
+        raise NotImplementedError
+
+    def forward(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """The predicted noise of noisy actions ``x`` ``[B, C, A]`` at timesteps ``t`` ``[B]``."""
+        return self.denoise(x, self.condition(t, cond))
+
+
+class ScaleDPPolicy(ImagePolicy):
+    """The encoders, and the DiT denoiser's modules at the top level. A fresh module is
+    initialised as DiT (adaLN-Zero: the untrained denoiser outputs exactly 0) and the trunks as
+    torchvision. (``ScaleDPPolicy.from_checkpoint`` of a DP-T checkpoint gives a
+    :class:`scaledp_data.policy.DPTPolicy`.)"""
+
+    def __init__(self, cfg: Dict[str, Any]):
+        super().__init__(cfg)
+        d, a, c = cfg["hidden"], cfg["action_dim"], cfg["action_chunk"]
+        self.x_embedder = nn.Linear(a, d)
+        self.pos_embed = nn.Parameter(torch.zeros(1, c, d))
+        self.t_embedder = TimestepEmbedder(d)
+        self.cond_obs_emb = nn.Linear(self.cond_dim, d)
+        causal = cfg.get("attention", "non_causal") == "causal"
+        self.blocks = nn.ModuleList(
+            [Block(d, cfg["heads"], cfg["mlp_ratio"], causal) for _ in range(cfg["depth"])])
+        self.final_layer = FinalLayer(d, a)
+        self.initialize()
+
+    def initialize(self, generator: Optional[torch.Generator] = None) -> None:
+        """DiT's initialisation of the denoiser (xavier-uniform linears, zero biases, N(0, 0.02)
+        for ``pos_embed``, ``cond_obs_emb`` and the timestep MLP, every adaLN linear and the
+        final linear zeroed), after the encoders'."""
+        g = generator
+
+        def normal(t: torch.Tensor, std: float) -> None:
+            with torch.no_grad():
+                t.copy_(torch.randn(t.shape, generator=g) * std)
+
+        self.initialize_encoders(g)
+        with torch.no_grad():
+            for name, m in self.named_modules():
+                if isinstance(m, nn.Linear) and not name.startswith("obs_encoder"):
+                    bound = math.sqrt(6.0 / (m.in_features + m.out_features))
+                    m.weight.copy_(torch.rand(m.weight.shape, generator=g) * 2 * bound - bound)
+                    m.bias.zero_()
+            normal(self.pos_embed, 0.02)
+            for lin in (self.cond_obs_emb, self.t_embedder.mlp[0], self.t_embedder.mlp[2]):
+                normal(lin.weight, 0.02)
+            for blk in self.blocks:
+                blk.adaLN_modulation[1].weight.zero_()
+                blk.adaLN_modulation[1].bias.zero_()
+            self.final_layer.adaLN_modulation[1].weight.zero_()
+            self.final_layer.adaLN_modulation[1].bias.zero_()
+            self.final_layer.linear.weight.zero_()
+            self.final_layer.linear.bias.zero_()
+
+    def condition(self, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """The adaLN condition ``t_emb + cond_emb`` ``[B, d]``."""
         return self.t_embedder(t) + self.cond_obs_emb(cond)
 
@@ -376,6 +404,19 @@ class ScaleDPPolicy(nn.Module):
             h = block(h, c)
         return self.final_layer(h, c)
 
-    def forward(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-        """The predicted noise of noisy actions ``x`` ``[B, C, A]`` at timesteps ``t`` ``[B]``."""
-        return self.denoise(x, self.condition(t, cond))
+
+def policy_class(cfg: Dict[str, Any]) -> type:
+    """The module class of a ``model`` config: ScaleDP, or DP-T (``arch: dp_t``)."""
+    arch = cfg.get("arch", "scale_dp")
+    if arch == "scale_dp":
+        return ScaleDPPolicy
+    if arch == "dp_t":
+        from .dpt import DPTPolicy
+
+        return DPTPolicy
+    raise ValueError(f"model arch {arch!r}: scale_dp or dp_t")
+
+
+def build_policy(cfg: Dict[str, Any]) -> ImagePolicy:
+    """A fresh module of either architecture for a ``model`` config."""
+    return policy_class(cfg)(cfg)

@@ -9,12 +9,17 @@ import argparse
 import math
 from typing import Any, Dict, Optional, Tuple
 
-__all__ = ["MODEL_SIZES", "PRESETS", "add_arguments", "default_options", "options_from_args", "cosine_lr",
+__all__ = ["MODEL_SIZES", "DPT_DIMS", "DPT_DROPOUT", "PRESETS", "add_arguments", "default_options", "options_from_args", "cosine_lr",
            "ema_decay"]
 
 #: The paper's sizes: depth, width, heads.
 MODEL_SIZES = {"ti": (8, 256, 4), "s": (12, 384, 6), "b": (12, 768, 12), "l": (24, 1024, 16),
                "h": (32, 1280, 16)}
+
+#: DP-T's defaults (diffusion_policy's hybrid image policy): layers, width, heads; and its
+#: ``p_drop_attn``.
+DPT_DIMS = (8, 256, 4)
+DPT_DROPOUT = 0.3
 
 
 #: ``TrainOptions::preset`` (policy/src/trainer/presets.rs): what each named recipe changes.
@@ -39,6 +44,7 @@ def default_options() -> Dict[str, Any]:
         "cameras": None, "image_size": None, "crop": 0.9, "loader_threads": 0,
         "max_episodes": None, "loss": {"noise_samples": 1, "mask_padding": False},
         "state_norm": "min_max", "image_range": "symmetric", "attention": "non_causal",
+        "arch": "scale_dp", "dropout": None,
     }
 
 
@@ -65,7 +71,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=sorted(PRESETS), help="a named recipe to start from "
                    "(cpu-sim: ScaleDP-Ti on the simulated cube task within three hours on two "
                    "CPU cores); the other flags override it one by one")
-    p.add_argument("--model", default="ti", help="model size: ti, s, b, l or h")
+    p.add_argument("--model", default="ti", help="model: a ScaleDP size (ti, s, b, l or h) or "
+                   "dp-t (the paper's baseline, diffusion_policy's transformer)")
+    p.add_argument("--layers", type=int, help="denoiser depth instead of the model's [ScaleDP: "
+                   "the size's; DP-T 8]")
+    p.add_argument("--width", type=int, help="denoiser width instead of the model's [DP-T 256]")
+    p.add_argument("--heads", type=int, help="attention heads instead of the model's [DP-T 4]")
+    p.add_argument("--dropout", type=float, help="dropout while training [DP-T 0.3; ScaleDP "
+                   "none]")
     p.add_argument("--out", metavar="DIR", help="run directory (metrics.jsonl, checkpoints/step_*)")
     p.add_argument("--resume", metavar="DIR", help="continue the run in this directory from its "
                    "latest checkpoint")
@@ -98,8 +111,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "first stage (64: the paper's encoder) [64]")
     p.add_argument("--noise-samples", type=int, help="(timestep, noise) draws per "
                    "encoded observation [1]")
-    p.add_argument("--attention", default="non-causal", help="non-causal (ScaleDP) or causal "
-                   "(the DP-T-style ablation)")
+    p.add_argument("--attention", help="non-causal or causal [ScaleDP: non-causal; DP-T: "
+                   "causal, its masks]")
     p.add_argument("--mask-padding", action="store_true", help="leave action steps past an "
                    "episode's end out of the loss")
     p.add_argument("--state-norm", default="min-max", help="min-max or mean-std")
@@ -130,8 +143,10 @@ def _attention(s: str) -> str:
 
 def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
     """The options of a new run from the command line (``options()`` of train.rs)."""
-    if a.model.lower() not in MODEL_SIZES:
-        raise ValueError(f"model size {a.model!r}: one of ti, s, b, l, h")
+    model = a.model.lower().replace("_", "-")
+    dpt = model in ("dp-t", "dpt")
+    if not dpt and model not in MODEL_SIZES:
+        raise ValueError(f"model {a.model!r}: one of ti, s, b, l, h, dp-t")
     state_norm = {"min-max": "min_max", "min_max": "min_max", "mean-std": "mean_std",
                   "mean_std": "mean_std"}.get(a.state_norm)
     if state_norm is None:
@@ -143,9 +158,13 @@ def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
             raise ValueError(f"--preset {preset}: one of {', '.join(sorted(PRESETS))}")
         o.update({k: v for k, v in PRESETS[preset].items() if k != "noise_samples"})
         o["loss"] = dict(o["loss"], noise_samples=PRESETS[preset].get("noise_samples", 1))
-    o.update({"size": a.model.lower(), "seed": a.seed, "crop": a.crop,
+    attention = a.attention if a.attention is not None else ("causal" if dpt else "non-causal")
+    o.update({"size": "ti" if dpt else model, "seed": a.seed, "crop": a.crop,
               "obs_horizon": a.obs_horizon, "action_chunk": a.action_chunk,
-              "attention": _attention(a.attention), "state_norm": state_norm})
+              "attention": _attention(attention), "state_norm": state_norm,
+              "arch": "dp_t" if dpt else "scale_dp"})
+    if getattr(a, "dropout", None) is not None:
+        o["dropout"] = float(a.dropout)
     for key in ("batch_size", "lr", "warmup_steps", "checkpoint_every", "val_every",
                 "val_ratio", "resnet_width"):
         if getattr(a, key, None) is not None:
@@ -166,6 +185,10 @@ def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
         o["cameras"] = list(a.cameras)
     if getattr(a, "denoiser", None):
         o["denoiser"] = list(a.denoiser)
+    shape = [getattr(a, k, None) for k in ("layers", "width", "heads")]
+    if any(v is not None for v in shape):
+        base = o["denoiser"] or list(DPT_DIMS if dpt else MODEL_SIZES[o["size"]])
+        o["denoiser"] = [v if v is not None else b for v, b in zip(shape, base)]
     if o["steps"] < 1 or o["batch_size"] < 1:
         raise ValueError("steps and batch size must be at least 1")
     return o

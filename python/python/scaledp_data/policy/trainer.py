@@ -26,7 +26,7 @@ import torch.distributed as dist
 
 from . import checkpoint as ckpt
 from .diffusion import DenoisingLoss, Draws, NoiseScheduler
-from .model import ScaleDPPolicy
+from .model import ImagePolicy, build_policy
 from .options import cosine_lr, ema_decay, encoder_decay
 from .validation import validate
 
@@ -81,11 +81,16 @@ def step_generator(seed: int, step: int) -> torch.Generator:
 
 
 def is_decayed(name: str) -> bool:
-    """Linear and Conv weights (what the Rust builder marks for weight decay)."""
-    return name.endswith(".weight") and ".bn" not in name and "downsample.1" not in name
+    """Linear and Conv weights and DP-T's attention in-projections (what the Rust builder marks
+    for weight decay); not the norms' weights (GroupNorm ``bn*``/``downsample.1``, DP-T's
+    LayerNorms)."""
+    if name.endswith(".in_proj_weight"):
+        return True
+    norms = (".bn", "downsample.1", ".norm", "ln_f.")
+    return name.endswith(".weight") and not any(n in name for n in norms)
 
 
-def param_groups(policy: ScaleDPPolicy, o: Dict[str, Any]) -> List[Dict[str, Any]]:
+def param_groups(policy: ImagePolicy, o: Dict[str, Any]) -> List[Dict[str, Any]]:
     """diffusion_policy's groups: every encoder tensor at ``encoder_weight_decay``, the
     denoiser's Linear weights at ``weight_decay``, the rest undecayed."""
     enc_wd, wd = encoder_decay(o), o["adamw"]["weight_decay"]
@@ -106,6 +111,8 @@ def _legacy(o: Dict[str, Any]) -> Dict[str, Any]:
     o.setdefault("state_norm", "mean_std")
     o.setdefault("image_range", "unit")
     o.setdefault("attention", "non_causal")
+    o.setdefault("arch", "scale_dp")
+    o.setdefault("dropout", None)
     return o
 
 
@@ -151,7 +158,7 @@ class Trainer:
         self.cfg = ckpt.checkpoint_config(dataset, self.train_ds.info,
                                           self.train_ds.normalizer.numpy, o)
         self.scheduler = NoiseScheduler(self.cfg["diffusion"]["train_steps"])
-        self.policy = ScaleDPPolicy(self.cfg["model"])
+        self.policy = build_policy(self.cfg["model"])
         self.policy.initialize(torch.Generator().manual_seed(o["seed"]))
         self.step_count = 0
         if resume_from is not None:
@@ -281,6 +288,12 @@ class Trainer:
         for g in self.optim.param_groups:
             g["lr"] = lr
         self.optim.zero_grad(set_to_none=True)
+        # Dropout (DP-T) draws from torch's global generator: seeded per step and rank, so a
+        # resumed run drops what an uninterrupted one would.
+        torch.manual_seed(int(torch.randint(0, 1 << 62, (1,),
+                                            generator=step_generator(o["seed"] ^ 0xD0, self.step_count)))
+                          + d.rank)
+        self.policy.train()
         micro = min(max(o["micro_batch"] or b, 1), b)
         starts = list(range(0, b, micro))
         total = torch.zeros((), dtype=torch.float64, device=dev)
@@ -333,7 +346,7 @@ class Trainer:
         """Rank 0 validates the EMA weights on held-out episodes; the others wait."""
         rec = None
         if self.d.main and self.val is not None:
-            model = ScaleDPPolicy(self.cfg["model"]).to(self.d.device)
+            model = build_policy(self.cfg["model"]).to(self.d.device).eval()
             model.load_state_dict(self.ema, strict=True)
             rec = validate(model, self.cfg, self.val, self.o["val_batches"], self.o["seed"],
                            self.step_count, self.d.device)

@@ -12,13 +12,13 @@ import numpy as np
 import torch
 
 from .diffusion import NoiseScheduler, ddim_sample
-from .model import ScaleDPPolicy
+from .model import ImagePolicy
 
 __all__ = ["validate"]
 
 
 @torch.no_grad()
-def validate(model: ScaleDPPolicy, cfg: Dict[str, Any], val: Any, batches: int, seed: int,
+def validate(model: ImagePolicy, cfg: Dict[str, Any], val: Any, batches: int, seed: int,
              step: int, device: torch.device) -> Dict[str, Any]:
     """Validates ``model`` on up to ``batches`` batches of the loader ``val`` (always the same
     ones: epoch 0); returns the ``"kind": "val"`` record of ``metrics.jsonl``."""
