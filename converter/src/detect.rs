@@ -200,6 +200,7 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                         tcp_xyz_rpy: None,
                         command_topic: None,
                         command_type: None,
+                        workspace: None,
                     });
                 } else if let Some(f) = js.name.iter().find(|n| n.ends_with("finger_joint1")) {
                     let prefix = f.trim_end_matches("finger_joint1").to_string();
@@ -281,6 +282,7 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
         control_rate_hz,
         arms,
         cameras,
+        simulator: None,
     };
     Rig::parse(&toml::to_string(&rig).unwrap_or_default(), path)
         .map_err(|e| Error::input(path, format!("detected rig is inconsistent: {e}")))

@@ -118,7 +118,11 @@ impl Controller {
             .flat_map(|a| std::iter::once(a.rate_hz).chain(a.gripper.as_ref().map(|g| g.rate_hz)))
             .map(|hz| 1.0 / hz)
             .fold(0.0, f64::max);
-        let obs_lag_s = opts.obs_lag_s.max(1.5 * slowest_s);
+        let obs_lag_s = if opts.lockstep {
+            0.0
+        } else {
+            opts.obs_lag_s.max(1.5 * slowest_s)
+        };
         let keep_frames_s = obs_lag_s + 0.15;
         let frames = cams
             .iter()

@@ -158,6 +158,28 @@ pub struct EvalReport {
     pub e2e_ms_p50: Option<f64>,
     /// Wall-clock time of the whole run (s).
     pub wall_s: f64,
+    /// A bridge rig's simulator: its packages' versions (`metaworld`, `mujoco`, …).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulator: Option<std::collections::BTreeMap<String, String>>,
+}
+
+impl EpisodeReport {
+    /// An episode of `seed` before it ran: nothing happened, not a success.
+    pub fn empty(seed: u64) -> Self {
+        EpisodeReport {
+            seed,
+            success: false,
+            time_to_success_s: None,
+            duration_s: 0.0,
+            cube_distance_m: Vec::new(),
+            chunks: 0,
+            commanded_ticks: 0,
+            clamped_ticks: 0,
+            halted_ticks: 0,
+            wall_s: 0.0,
+            recording: None,
+        }
+    }
 }
 
 impl EvalReport {
@@ -200,14 +222,18 @@ enum Source {
     Gripper(usize),
 }
 
-/// Runs `opts.episodes` episodes of `policy` on `rig`'s simulated task; `on_episode` sees each
-/// outcome as it comes.
+/// Runs `opts.episodes` episodes of `policy` on `rig`'s simulated task (the built-in cell, or
+/// the rig's bridge simulator: [`crate::bridge_eval`]); `on_episode` sees each outcome as it
+/// comes.
 pub fn run_eval(
     policy: &Policy,
     rig: &Rig,
     opts: &EvalOptions,
     on_episode: &mut dyn FnMut(&EpisodeReport),
 ) -> Result<EvalReport> {
+    if rig.simulator.is_some() {
+        return crate::bridge_eval::run_bridge_eval(policy, rig, opts, on_episode);
+    }
     let ckpt = policy.dir().display().to_string();
     let mut ctl = Controller::new(policy.config(), &ckpt, rig, opts.control.clone())?;
     if !(opts.max_seconds > 0.0 && opts.max_seconds.is_finite()) {
@@ -290,6 +316,7 @@ pub(crate) fn summarize(
         inference_ms_p99: None,
         e2e_ms_p50: None,
         wall_s: 0.0,
+        simulator: None,
         episodes,
     }
 }
@@ -330,19 +357,7 @@ fn episode(
     let mut next_tick = tick_period;
     let end_ns = (opts.max_seconds * 1e9) as u64;
     let mut pixels = Vec::new();
-    let mut rep = EpisodeReport {
-        seed,
-        success: false,
-        time_to_success_s: None,
-        duration_s: 0.0,
-        cube_distance_m: Vec::new(),
-        chunks: 0,
-        commanded_ticks: 0,
-        clamped_ticks: 0,
-        halted_ticks: 0,
-        wall_s: 0.0,
-        recording: None,
-    };
+    let mut rep = EpisodeReport::empty(seed);
     loop {
         let next_sample = sources.iter().map(|s| s.2).min().unwrap_or(u64::MAX);
         let t = next_sample.min(next_tick);

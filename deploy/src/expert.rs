@@ -21,6 +21,9 @@ pub fn run_expert(
     opts: &EvalOptions,
     on_episode: &mut dyn FnMut(&EpisodeReport),
 ) -> Result<EvalReport> {
+    if rig.simulator.is_some() {
+        return crate::bridge_eval::run_bridge_expert(rig, opts, on_episode);
+    }
     if rig.arms.is_empty() {
         return Err(Error::Options(format!(
             "rig {} has no arm to operate",

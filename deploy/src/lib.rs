@@ -14,9 +14,12 @@
 //!   demonstrations' (0 …), validation (1 000 000 …, to choose checkpoints and tune) and test
 //!   (2 000 000 …, what is reported). [`run_expert`] scores the scripted teleoperator on the
 //!   same seeds (the ceiling control); [`ControlOptions::freeze_cameras`] the vision control.
+//! - Rigs whose simulator runs behind the bridge protocol (`metaworld/<task>`) are evaluated
+//!   the same way, the simulator stepped once per control tick ([`run_eval`] dispatches).
 //! - [`check`] refuses, in one line and before anything moves, a checkpoint for another rig or
 //!   a rig lacking the checkpoint's cameras or dimensions.
 
+mod bridge_eval;
 pub mod check;
 pub mod controller;
 mod error;
@@ -36,6 +39,7 @@ pub use error::{Error, Result};
 pub use eval::{run_eval, EpisodeReport, EvalOptions, EvalReport, Split};
 pub use expert::run_expert;
 pub use live::run_live;
+pub use recording::task_text;
 pub use safety::{Limits, Workspace};
 pub use serve::{ServeOptions, Server, Status};
 pub use stats::{percentile, wilson_interval};

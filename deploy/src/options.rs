@@ -27,6 +27,10 @@ pub struct ControlOptions {
     /// A control for evaluations: every observation shows the cameras' first frames of the
     /// episode (the state stays live), so a policy that succeeds anyway is not using vision.
     pub freeze_cameras: bool,
+    /// Every stream's sample for a tick is delivered before the tick (a simulator stepped in
+    /// lockstep): the observation is taken at the tick itself, as the converter aligned the
+    /// training data, and `obs_lag_s` is ignored.
+    pub lockstep: bool,
 }
 
 impl Default for ControlOptions {
@@ -41,6 +45,7 @@ impl Default for ControlOptions {
             frame_stale_periods: 1.5,
             obs_lag_s: 0.05,
             freeze_cameras: false,
+            lockstep: false,
         }
     }
 }

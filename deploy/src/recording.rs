@@ -11,12 +11,16 @@ use scaledp_schema::{EpisodeMetadata, Label, Rig};
 
 use crate::error::{Error, Result};
 
-/// The task in words, as `scaledp collect` states it.
-pub fn task_text(arms: usize) -> &'static str {
-    if arms > 1 {
-        "put the red cube on the green square and the blue cube on the yellow square"
+/// The task in words, as `scaledp collect` states it: the cube cell's, or a simulator's task
+/// by name (`metaworld assembly`).
+pub fn task_text(rig: &Rig) -> String {
+    if let Some(sim) = &rig.simulator {
+        return format!("{} {}", sim.bridge, sim.task);
+    }
+    if rig.arms.len() > 1 {
+        "put the red cube on the green square and the blue cube on the yellow square".into()
     } else {
-        "put the red cube on the green square"
+        "put the red cube on the green square".into()
     }
 }
 
@@ -47,7 +51,7 @@ impl Rollout {
         let topics = rig.topics();
         let meta = EpisodeMetadata {
             episode_index: Some(index),
-            task: task_text(rig.arms.len()).into(),
+            task: task_text(rig),
             operator: format!("policy {checkpoint}"),
             rig_name: rig.name.clone(),
             rig_toml: toml::to_string(rig).ok(),

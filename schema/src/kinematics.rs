@@ -1,8 +1,11 @@
-//! Forward kinematics of the arms scaledp knows, from their published DH parameters.
+//! Forward kinematics of the arms scaledp knows: from their published DH parameters, and for
+//! the simulation benchmarks' arms from the simulators' own models ([`crate::chains`]).
 //!
 //! Frames: `base` is the robot's base link (`fr3_link0`, UR `base_link` in the DH convention,
-//! i.e. rotated 180° about z from the ROS `base_link` of ur_description); `flange` is the last
-//! DH frame (`fr3_link8`, UR `tool0`). Tool centre points are added by the caller.
+//! i.e. rotated 180° about z from the ROS `base_link` of ur_description; MetaWorld's world frame
+//! for its Sawyer; the arm's root body for gym-aloha's ViperX); `flange` is the last DH frame
+//! (`fr3_link8`, UR `tool0`), MetaWorld's `hand` body, the ViperX's `gripper_link`. Tool centre
+//! points are added by the caller.
 
 use std::f64::consts::FRAC_PI_2;
 use std::fmt;
@@ -10,6 +13,7 @@ use std::fmt;
 use glam::{DMat3, DMat4, DVec3};
 use serde::{Deserialize, Serialize};
 
+use crate::chains;
 use crate::error::{Error, Result};
 
 /// An arm model with built-in kinematics.
@@ -24,6 +28,10 @@ pub enum RobotModel {
     Ur5,
     /// Universal Robots UR5e.
     Ur5e,
+    /// Rethink Sawyer, as MetaWorld simulates it.
+    Sawyer,
+    /// Trossen ViperX 300 6DOF, as gym-aloha simulates it (ALOHA's arms).
+    Vx300s,
 }
 
 impl fmt::Display for RobotModel {
@@ -33,6 +41,8 @@ impl fmt::Display for RobotModel {
             Self::Panda => "panda",
             Self::Ur5 => "ur5",
             Self::Ur5e => "ur5e",
+            Self::Sawyer => "sawyer",
+            Self::Vx300s => "vx300s",
         })
     }
 }
@@ -83,6 +93,8 @@ impl RobotModel {
         match self {
             Self::Fr3 | Self::Panda => 7,
             Self::Ur5 | Self::Ur5e => 6,
+            Self::Sawyer => chains::SAWYER.dof(),
+            Self::Vx300s => chains::VX300S.dof(),
         }
     }
 
@@ -115,10 +127,30 @@ impl RobotModel {
             (-TAU, TAU),
             (-TAU, TAU),
         ];
+        // The MJCF joint ranges.
+        const SAWYER: [(f64, f64); 7] = [
+            (-3.0503, 3.0503),
+            (-3.8, -0.5),
+            (-3.0426, 3.0426),
+            (-3.0439, 3.0439),
+            (-2.9761, 2.9761),
+            (-2.9761, 2.9761),
+            (-4.7124, 4.7124),
+        ];
+        const VX300S: [(f64, f64); 6] = [
+            (-3.14158, 3.14158),
+            (-1.85005, 1.25664),
+            (-1.76278, 1.6057),
+            (-3.14158, 3.14158),
+            (-1.8675, 2.23402),
+            (-3.14158, 3.14158),
+        ];
         match self {
             Self::Panda => &PANDA,
             Self::Fr3 => &FR3,
             Self::Ur5 | Self::Ur5e => &UR,
+            Self::Sawyer => &SAWYER,
+            Self::Vx300s => &VX300S,
         }
     }
 
@@ -155,8 +187,26 @@ impl RobotModel {
                     out.push(t);
                 }
             }
+            Self::Sawyer => out = chains::SAWYER.frames(q),
+            Self::Vx300s => out = chains::VX300S.frames(q),
         }
         Ok(out)
+    }
+
+    /// Where joint `i` turns, for a model given as an MJCF chain (Sawyer, ViperX): its origin and
+    /// axis in the base frame, from the `frames` of [`Self::frames`]. `None` for the DH models
+    /// (their axes follow from the DH convention) or a bad index.
+    pub fn joint_axis(self, i: usize, frames: &[DMat4]) -> Option<(DVec3, DVec3)> {
+        let chain = match self {
+            Self::Sawyer => &chains::SAWYER,
+            Self::Vx300s => &chains::VX300S,
+            _ => return None,
+        };
+        let (f, j) = (frames.get(i)?, chain.joints.get(i)?);
+        Some((
+            f.w_axis.truncate(),
+            f.transform_vector3(DVec3::from_array(j.axis)),
+        ))
     }
 
     /// `base_from_flange` for joint positions `q` (rad), in the model's joint order.
@@ -165,13 +215,14 @@ impl RobotModel {
     }
 
     /// The usual `flange_from_tcp` for this arm's standard gripper: the Franka Hand's fingertip
-    /// centre (0.1034 m along z, −45° about z); for UR arms, identity (tool0).
+    /// centre (0.1034 m along z, −45° about z); identity for the others (UR `tool0`, MetaWorld's
+    /// `hand`, the ViperX's `gripper_link`).
     pub fn default_flange_from_tcp(self) -> DMat4 {
         match self {
             Self::Fr3 | Self::Panda => {
                 trans(0.0, 0.0, 0.1034) * rot_z(-std::f64::consts::FRAC_PI_4)
             }
-            Self::Ur5 | Self::Ur5e => DMat4::IDENTITY,
+            Self::Ur5 | Self::Ur5e | Self::Sawyer | Self::Vx300s => DMat4::IDENTITY,
         }
     }
 }

@@ -5,7 +5,9 @@
 //! No I/O framework, no networking: everything else in the workspace depends on this crate,
 //! and it depends on nothing heavy.
 
+pub mod benchmarks;
 mod cdr;
+mod chains;
 pub mod episode;
 mod error;
 pub mod kinematics;

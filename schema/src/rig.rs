@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::benchmarks::{Simulator, SimulatorKind};
 use crate::error::{Error, Result};
 use crate::kinematics::RobotModel;
 
@@ -24,6 +25,10 @@ pub struct Rig {
     /// Cameras.
     #[serde(rename = "camera", default)]
     pub cameras: Vec<Camera>,
+    /// The simulator this rig stands for (`metaworld/<task>` rigs): what `scaledp sim`,
+    /// `collect` and `eval` run behind the bridge protocol instead of the built-in cell.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulator: Option<Simulator>,
 }
 
 /// One arm and its gripper.
@@ -56,6 +61,10 @@ pub struct Arm {
     /// What `command_topic` carries (default: a `PoseStamped` TCP target in the base frame).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub command_type: Option<CommandType>,
+    /// The box TCP targets are kept in, in the base frame: `[xmin, ymin, zmin, xmax, ymax,
+    /// zmax]` (m). Default: the simulated cell's table patch (`serve --workspace` overrides it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub workspace: Option<[f64; 6]>,
 }
 
 /// The message type of an arm's command topic.
@@ -100,6 +109,9 @@ pub enum GripperModel {
     FrankaHand,
     /// Robotiq 2F-85: one knuckle angle, 0 (open, 85 mm) to 0.8 rad (closed).
     Robotiq2f85,
+    /// MetaWorld's Sawyer gripper: prismatic `r_close` (0 open … 0.04) and `l_close` (−0.03 …
+    /// 0 open); the pads are 0.094 − r + l apart.
+    MetaworldSawyer,
 }
 
 impl GripperModel {
@@ -108,6 +120,11 @@ impl GripperModel {
         match self {
             Self::FrankaHand => positions.iter().sum(),
             Self::Robotiq2f85 => 0.085 * (1.0 - positions.first().copied().unwrap_or(0.0) / 0.8),
+            Self::MetaworldSawyer => {
+                let r = positions.first().copied().unwrap_or(0.0);
+                let l = positions.get(1).copied().unwrap_or(0.0);
+                0.094 - r + l
+            }
         }
     }
     /// Joint positions giving an opening width (m), inverse of [`Self::width_m`].
@@ -115,6 +132,12 @@ impl GripperModel {
         match self {
             Self::FrankaHand => vec![width_m / joints.max(1) as f64; joints],
             Self::Robotiq2f85 => vec![0.8 * (1.0 - width_m / 0.085); joints],
+            Self::MetaworldSawyer => {
+                let c = (0.094 - width_m) / 2.0;
+                let mut q = vec![c, -c];
+                q.resize(joints, 0.0);
+                q
+            }
         }
     }
     /// Widest opening (m).
@@ -122,6 +145,7 @@ impl GripperModel {
         match self {
             Self::FrankaHand => 0.08,
             Self::Robotiq2f85 => 0.085,
+            Self::MetaworldSawyer => 0.094,
         }
     }
 }
@@ -152,6 +176,8 @@ pub enum CameraModel {
     Zed,
     /// Intel RealSense (realsense-ros): `rgb8`.
     Realsense,
+    /// A simulator's camera (the simulation benchmarks' bridges): `rgb8`.
+    Sim,
 }
 
 impl CameraModel {
@@ -159,7 +185,7 @@ impl CameraModel {
     pub fn default_encoding(self) -> &'static str {
         match self {
             Self::Zed => "bgra8",
-            Self::Realsense => "rgb8",
+            Self::Realsense | Self::Sim => "rgb8",
         }
     }
 }
@@ -271,8 +297,11 @@ impl Rig {
 
     /// The rigs shipped in `rigs/`, by name: `franka_2zed`, `bimanual_ur5_3rs`, and their
     /// simulated task cells with command topics and smaller images, `franka_sim` and
-    /// `bimanual_ur5_sim`.
+    /// `bimanual_ur5_sim`; and the simulation benchmarks' `metaworld/<task>`.
     pub fn builtin(name: &str) -> Option<Self> {
+        if let Some(rig) = crate::benchmarks::builtin(name) {
+            return rig.ok();
+        }
         let (_, text) = BUILTIN.iter().find(|(n, _)| *n == name)?;
         Self::parse(text, &PathBuf::from(format!("rigs/{name}.toml"))).ok()
     }
@@ -286,6 +315,9 @@ impl Rig {
     pub fn load_or_builtin(path_or_name: &str) -> Result<Self> {
         let path = Path::new(path_or_name);
         if !path.exists() {
+            if let Some(rig) = crate::benchmarks::builtin(path_or_name) {
+                return rig;
+            }
             if let Some(rig) = Self::builtin(path_or_name) {
                 return Ok(rig);
             }
@@ -376,6 +408,14 @@ impl Rig {
             }
             if !positive(arm.rate_hz) {
                 return Err(format!("arm '{}': rate_hz must be > 0", arm.name));
+            }
+            if let Some(w) = arm.workspace {
+                if !w.iter().all(|v| v.is_finite()) || (0..3).any(|k| w[k] > w[k + 3]) {
+                    return Err(format!(
+                        "arm '{}': workspace {w:?} is not [xmin, ymin, zmin, xmax, ymax, zmax]",
+                        arm.name
+                    ));
+                }
             }
             if let Some(g) = &arm.gripper {
                 if g.joint_names.is_empty() || !positive(g.rate_hz) {
@@ -544,12 +584,20 @@ mod tests {
 
     #[test]
     fn gripper_width_round_trips() {
-        for m in [GripperModel::FrankaHand, GripperModel::Robotiq2f85] {
+        for m in [
+            GripperModel::FrankaHand,
+            GripperModel::Robotiq2f85,
+            GripperModel::MetaworldSawyer,
+        ] {
             let q = m.positions_for_width(0.05, 2);
             assert!(
-                (m.width_m(&q[..if m == GripperModel::FrankaHand { 2 } else { 1 }]) - 0.05).abs()
+                (m.width_m(&q[..if m == GripperModel::Robotiq2f85 { 1 } else { 2 }]) - 0.05).abs()
                     < 1e-12
             );
         }
+        // MetaWorld: both pads open at 0.094 m, closed fingers (r 0.04, l −0.03) at 0.024 m.
+        let mw = GripperModel::MetaworldSawyer;
+        assert!((mw.width_m(&[0.0, 0.0]) - 0.094).abs() < 1e-12);
+        assert!((mw.width_m(&[0.04, -0.03]) - 0.024).abs() < 1e-12);
     }
 }

@@ -38,6 +38,14 @@ pub enum Error {
     /// A camera's video encoder could not be made.
     #[error("{0}")]
     Video(String),
+    /// A simulator behind the bridge protocol failed (or could not be started).
+    #[error("{what}: {reason}")]
+    Bridge {
+        /// What was being done (`metaworld/assembly: reset to seed 3`).
+        what: String,
+        /// What went wrong, with the bridge's own message where it gave one.
+        reason: String,
+    },
     /// Writing an episode failed.
     #[error(transparent)]
     Recorder(#[from] scaledp_recorder::Error),

@@ -23,11 +23,16 @@ pub fn velocity_limits(model: RobotModel) -> &'static [f64] {
     use std::f64::consts::{PI, TAU};
     const UR5: [f64; 6] = [PI; 6];
     const UR5E: [f64; 6] = [PI, PI, PI, TAU, TAU, TAU];
+    // Sawyer: Rethink's data sheet; ViperX 300: Dynamixel XM540/XM430 at 12 V, about π rad/s.
+    const SAWYER: [f64; 7] = [1.74, 1.328, 1.957, 1.957, 3.485, 3.485, 4.545];
+    const VX300S: [f64; 6] = [PI; 6];
     match model {
         RobotModel::Fr3 => &FR3,
         RobotModel::Panda => &PANDA,
         RobotModel::Ur5 => &UR5,
         RobotModel::Ur5e => &UR5E,
+        RobotModel::Sawyer => &SAWYER,
+        RobotModel::Vx300s => &VX300S,
     }
 }
 
@@ -92,18 +97,22 @@ pub fn jacobian(model: RobotModel, q: &[f64], tcp: DVec3) -> Option<[[f64; MAX_D
     for i in 0..model.dof() {
         // Modified DH (Franka): joint i turns about z of its own frame. Standard DH (UR): about
         // z of the frame before it (the base for the first joint).
-        let axis_frame = match model {
-            RobotModel::Fr3 | RobotModel::Panda => frames[i],
+        let (origin, z) = match model {
+            RobotModel::Fr3 | RobotModel::Panda => {
+                (frames[i].w_axis.truncate(), frames[i].z_axis.truncate())
+            }
             RobotModel::Ur5 | RobotModel::Ur5e => {
-                if i == 0 {
+                let f = if i == 0 {
                     DMat4::IDENTITY
                 } else {
                     frames[i - 1]
-                }
+                };
+                (f.w_axis.truncate(), f.z_axis.truncate())
             }
+            // Chains from MJCF models: joint i turns about its own axis in its own frame.
+            RobotModel::Sawyer | RobotModel::Vx300s => model.joint_axis(i, &frames)?,
         };
-        let z = axis_frame.z_axis.truncate();
-        let lin = z.cross(tcp - axis_frame.w_axis.truncate());
+        let lin = z.cross(tcp - origin);
         for (r, v) in [lin.x, lin.y, lin.z, z.x, z.y, z.z].into_iter().enumerate() {
             j[r][i] = v;
         }
@@ -281,12 +290,18 @@ mod tests {
         match model {
             RobotModel::Fr3 | RobotModel::Panda => vec![0.0, -0.6, 0.0, -2.3, 0.0, 1.7, 0.8],
             RobotModel::Ur5 | RobotModel::Ur5e => vec![0.0, -1.9, 1.9, -1.57, -1.57, 0.0],
+            RobotModel::Sawyer => vec![1.89, -0.58, -0.98, 1.64, 0.94, 1.04, 2.29],
+            RobotModel::Vx300s => vec![0.0, -0.96, 1.16, 0.0, -0.3, 0.0],
         }
     }
 
     #[test]
     fn the_jacobian_matches_finite_differences() {
-        for model in MODELS {
+        // The benchmarks' MJCF chains too (their axes come from the chain, not a DH rule).
+        for model in MODELS
+            .into_iter()
+            .chain([RobotModel::Sawyer, RobotModel::Vx300s])
+        {
             let q = home(model);
             let tcp = model.default_flange_from_tcp();
             let fk = |q: &[f64]| model.base_from_flange(q).unwrap() * tcp;

@@ -21,6 +21,7 @@
 //! (cameras tens of ms, arms well under one ms), both with seeded jitter. Everything but the
 //! wall-clock origin and, live, the timing of threads is fixed by the seed.
 
+pub mod bridge;
 mod error;
 pub mod headless;
 pub mod ik;

@@ -41,6 +41,12 @@ pub fn base_frame_id(arm: &Arm) -> String {
             let prefix = first.strip_suffix("shoulder_pan_joint").unwrap_or_default();
             format!("{prefix}base")
         }
+        // MetaWorld's world frame is the Sawyer's base frame.
+        RobotModel::Sawyer => "base".into(),
+        // gym-aloha's `vx300s_left` / `vx300s_right` root bodies.
+        RobotModel::Vx300s => first
+            .split_once('/')
+            .map_or_else(|| "base_link".into(), |(p, _)| p.to_string()),
     }
 }
 
@@ -59,6 +65,17 @@ pub fn joint_state(arm: &Arm, s: &ArmState, stamp_ns: u64) -> JointState {
         position: s.q.clone(),
         velocity: s.qd.clone(),
         effort: vec![0.0; s.q.len()],
+    }
+}
+
+/// A `JointState` of the arm's joint positions `q` (rig order), velocities and efforts zero.
+pub fn joint_state_of(arm: &Arm, q: &[f64], stamp_ns: u64) -> JointState {
+    JointState {
+        header: header(stamp_ns, String::new()),
+        name: arm.joint_names.clone(),
+        position: q.to_vec(),
+        velocity: vec![0.0; q.len()],
+        effort: vec![0.0; q.len()],
     }
 }
 

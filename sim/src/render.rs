@@ -55,7 +55,8 @@ pub fn horizontal_fov_rad(model: CameraModel, wrist: bool) -> f64 {
     match (model, wrist) {
         (CameraModel::Zed, false) => 75f64.to_radians(),
         (CameraModel::Zed, true) => 90f64.to_radians(),
-        (CameraModel::Realsense, _) => 69f64.to_radians(),
+        // A simulator camera in the built-in cell is drawn as a RealSense.
+        (CameraModel::Realsense | CameraModel::Sim, _) => 69f64.to_radians(),
     }
 }
 

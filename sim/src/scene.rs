@@ -86,6 +86,8 @@ pub fn flange_from_fingertips(arm: &Arm) -> DMat4 {
     match arm.model {
         RobotModel::Fr3 | RobotModel::Panda => RobotModel::Fr3.default_flange_from_tcp(),
         RobotModel::Ur5 | RobotModel::Ur5e => DMat4::from_translation(DVec3::new(0.0, 0.0, 0.15)),
+        // The benchmarks' arms (their own simulators run them): the flange itself.
+        RobotModel::Sawyer | RobotModel::Vx300s => DMat4::IDENTITY,
     }
 }
 
@@ -94,6 +96,9 @@ fn seed_posture(model: RobotModel) -> Vec<f64> {
     match model {
         RobotModel::Fr3 | RobotModel::Panda => vec![0.0, -0.3, 0.0, -2.2, 0.0, 1.95, 0.785],
         RobotModel::Ur5 | RobotModel::Ur5e => vec![0.0, -1.9, 1.9, -1.57, -1.57, 0.0],
+        // MetaWorld's and ALOHA's start postures.
+        RobotModel::Sawyer => vec![1.89, -0.58, -0.98, 1.64, 0.94, 1.04, 2.29],
+        RobotModel::Vx300s => vec![0.0, -0.96, 1.16, 0.0, -0.3, 0.0],
     }
 }
 
@@ -108,8 +113,8 @@ impl Scene {
             .map(|(i, arm)| {
                 let y = ((n as f64 - 1.0) / 2.0 - i as f64) * 0.7;
                 let turn = match arm.model {
-                    RobotModel::Fr3 | RobotModel::Panda => 0.0,
                     RobotModel::Ur5 | RobotModel::Ur5e => std::f64::consts::PI,
+                    _ => 0.0,
                 };
                 let world_from_base = DMat4::from_translation(DVec3::new(0.0, y, TABLE_Z_M))
                     * DMat4::from_rotation_z(turn);
@@ -118,8 +123,8 @@ impl Scene {
                 // 0 in the base frame), the Robotiq's along x (TCP yaw π/2 in the DH base frame).
                 // Both are far from the ±π wrap, like the roll.
                 let yaw = match arm.model {
-                    RobotModel::Fr3 | RobotModel::Panda => 0.0,
                     RobotModel::Ur5 | RobotModel::Ur5e => -std::f64::consts::FRAC_PI_2,
+                    _ => 0.0,
                 };
                 let grasp_rotation = DMat3::from_rotation_z(yaw)
                     * DMat3::from_rotation_x(std::f64::consts::PI - TOOL_TILT_RAD);

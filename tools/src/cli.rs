@@ -198,7 +198,8 @@ pub struct SimArgs {
 #[derive(Debug, Args)]
 pub struct CollectArgs {
     /// Rig file, or the name of a shipped rig (franka_sim and bimanual_ur5_sim carry command
-    /// topics, so the commands are recorded too).
+    /// topics, so the commands are recorded too; metaworld/<task> runs one of MetaWorld's 50
+    /// tasks with its scripted expert).
     #[arg(long, default_value = "franka_sim")]
     pub rig: String,
     /// Publish and record the cameras as compressed video (default: as the rig says).
@@ -207,6 +208,11 @@ pub struct CollectArgs {
     /// Episodes to collect.
     #[arg(long, default_value_t = 100)]
     pub episodes: u64,
+    /// Collect until this many episodes succeeded instead (at most 2N + 10 seeds): N
+    /// demonstrations when the expert sometimes fails (failures are recorded and labelled, and
+    /// `convert` skips them).
+    #[arg(long, value_name = "N", conflicts_with = "episodes")]
+    pub successes: Option<u64>,
     /// Directory for episode_NNNNNN.mcap files (numbering continues after existing ones) and
     /// collect.jsonl (seed and outcome of each episode).
     #[arg(long)]

@@ -243,7 +243,8 @@ fn finish(
     let path = a.report.clone().unwrap_or_else(|| {
         dir.join(format!(
             "eval-{}-seed{seed}-n{}{suffix}.json",
-            rig.name, a.episodes
+            rig.name.replace('/', "_"),
+            a.episodes
         ))
     });
     report.write(&path)?;
