@@ -7,29 +7,56 @@ use clap::{Args, Subcommand};
 /// `scaledp experiment <command>`.
 #[derive(Debug, Subcommand)]
 pub enum ExperimentCommand {
-    /// Trains and evaluates the comparison's arms (ScaleDP-Ti non-causal vs causal, Ti vs S)
-    /// with one recipe on the same demonstrations and seeds; each arm resumes where it stopped
-    /// and writes its result as it lands, and the table and plot are rebuilt from what is there.
-    Compare(CompareArgs),
+    /// Trains and evaluates the comparison's arms (ScaleDP-Ti non-causal vs causal, Ti vs S,
+    /// DP-T) with one recipe on the same demonstrations and seeds, on one dataset or a
+    /// benchmark's tasks; each arm resumes where it stopped and writes its result as it lands,
+    /// and the table and plot are rebuilt from what is there.
+    Compare(Box<CompareArgs>),
     /// Rebuilds the table and the plot of an experiment from its arms' result files.
     Report(ReportArgs),
+}
+
+/// A simulation benchmark `compare` can run end to end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Benchmark {
+    /// MetaWorld: per task, demonstrations by its scripted expert (`scaledp collect --rig
+    /// metaworld/<task> --successes N`), converted, every arm trained and scored on the test
+    /// seeds, the controls beside them; the table by difficulty level.
+    Metaworld,
 }
 
 /// `scaledp experiment compare`.
 #[derive(Debug, Clone, Args)]
 pub struct CompareArgs {
-    /// The training dataset (LeRobot v3.0, e.g. `scaledp convert` of `scaledp collect`).
+    /// The training dataset (LeRobot v3.0, e.g. `scaledp convert` of `scaledp collect`); not
+    /// with --benchmark, which makes its own.
+    #[arg(long, required_unless_present = "benchmark")]
+    pub dataset: Option<String>,
+    /// Run a simulation benchmark's tasks instead of one dataset (--tasks).
+    #[arg(long, value_enum, conflicts_with = "dataset")]
+    pub benchmark: Option<Benchmark>,
+    /// The benchmark's tasks, comma-separated (MetaWorld task names), each run to the end
+    /// (every arm) before the next.
+    #[arg(long, value_delimiter = ',', requires = "benchmark")]
+    pub tasks: Vec<String>,
+    /// Successful demonstrations per task (the paper: 20).
+    #[arg(long, default_value_t = 20)]
+    pub demos: u64,
+    /// Episodes of each control of a benchmark task (untrained weights and frozen cameras of
+    /// the first arm; the scripted expert always runs on every test seed).
+    #[arg(long, default_value_t = 20)]
+    pub controls_episodes: u64,
+    /// The experiment's name: results go to RESULTS/NAME, runs to RUNS/NAME (default: cpu-sim,
+    /// or the benchmark's name).
     #[arg(long)]
-    pub dataset: String,
-    /// The experiment's name: results go to RESULTS/NAME, runs to RUNS/NAME.
-    #[arg(long, default_value = "cpu-sim")]
-    pub name: String,
-    /// Arms to run, comma-separated (ti, ti-causal, s), one after the other.
-    #[arg(long, value_delimiter = ',', default_value = "ti,ti-causal,s")]
+    pub name: Option<String>,
+    /// Arms to run, comma-separated (ti, ti-causal, s, dp-t, dp-t-l12, dp-t-l14), one after the
+    /// other [ti,ti-causal,s; a benchmark: ti,dp-t].
+    #[arg(long, value_delimiter = ',')]
     pub arms: Vec<String>,
-    /// The training recipe every arm uses.
-    #[arg(long, default_value = "cpu-sim")]
-    pub preset: String,
+    /// The training recipe every arm uses [cpu-sim; MetaWorld: cpu-metaworld].
+    #[arg(long)]
+    pub preset: Option<String>,
     /// Optimizer steps instead of the preset's.
     #[arg(long)]
     pub steps: Option<u64>,
@@ -46,16 +73,17 @@ pub struct CompareArgs {
     /// Where the results go (small files, meant to be committed).
     #[arg(long, default_value = "docs/results")]
     pub results: PathBuf,
-    /// Validation episodes per checkpoint (seeds 1 000 000 …): they choose the checkpoint.
-    #[arg(long, default_value_t = 20)]
-    pub val_episodes: u64,
+    /// Validation episodes per checkpoint (seeds 1 000 000 …): they choose the checkpoint
+    /// (0: the last checkpoint is scored, as the benchmarks do).
+    #[arg(long)]
+    pub val_episodes: Option<u64>,
     /// Test episodes of the chosen checkpoint (seeds 2 000 000 …): the reported figure.
     #[arg(long, default_value_t = 50)]
     pub test_episodes: u64,
     /// Episodes of the chosen checkpoint in real time over loopback Zenoh (`eval --live`), for
-    /// the recipe's arm (0: none).
-    #[arg(long, default_value_t = 20)]
-    pub live_episodes: u64,
+    /// the recipe's arm (0: none) [20; a benchmark: 0].
+    #[arg(long)]
+    pub live_episodes: Option<u64>,
     /// Skip the controls (untrained weights, frozen cameras, the scripted expert) of the
     /// recipe's arm.
     #[arg(long)]

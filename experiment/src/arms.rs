@@ -1,43 +1,108 @@
-//! The comparison's arms: the recipe's model, the causal ablation, the next size up.
+//! The comparison's arms: the recipe's model, the causal ablation, the next size up, and the
+//! paper's baseline (DP-T) with the depths its scaling claim is about.
 
-use scaledp_policy::{Attention, ModelSize};
+use scaledp_policy::{Architecture, Attention, ModelSize, TrainOptions, DPT_DIMS};
 
-/// One arm: a model size and an attention pattern, everything else the recipe's.
+/// One arm: a denoiser (architecture, size, depth, attention), everything else the recipe's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Arm {
-    /// Its name (`ti`, `ti-causal`, `s`): the run directory and result file are named by it.
+    /// Its name (`ti`, `ti-causal`, `s`, `dp-t`, …): the run directory and result file are
+    /// named by it.
     pub name: &'static str,
-    /// The denoiser's size.
+    /// The denoiser's architecture.
+    pub arch: Architecture,
+    /// The ScaleDP size (its depth, width and heads; unused by DP-T).
     pub size: ModelSize,
+    /// A depth other than the size's (or DP-T's 8).
+    pub layers: Option<usize>,
     /// The denoiser's attention.
     pub attention: Attention,
     /// One line for the table.
     pub what: &'static str,
 }
 
-/// Every arm, the recipe's first.
-pub const ARMS: [Arm; 3] = [
+impl Arm {
+    /// The recipe `base` with this arm's denoiser.
+    pub fn options(&self, base: TrainOptions) -> TrainOptions {
+        let o = base
+            .arch(self.arch)
+            .model(self.size)
+            .attention(self.attention);
+        match self.layers {
+            Some(depth) => {
+                let (_, width, heads) = match self.arch {
+                    Architecture::ScaleDp => self.size.dims(),
+                    Architecture::DpT => DPT_DIMS,
+                };
+                o.denoiser(depth, width, heads)
+            }
+            None => o,
+        }
+    }
+}
+
+const fn scaledp(
+    name: &'static str,
+    size: ModelSize,
+    attention: Attention,
+    what: &'static str,
+) -> Arm {
     Arm {
-        name: "ti",
-        size: ModelSize::Ti,
-        attention: Attention::NonCausal,
-        what: "ScaleDP-Ti, non-causal attention (the recipe)",
-    },
+        name,
+        arch: Architecture::ScaleDp,
+        size,
+        layers: None,
+        attention,
+        what,
+    }
+}
+
+const fn dpt(name: &'static str, layers: Option<usize>, what: &'static str) -> Arm {
     Arm {
-        name: "ti-causal",
+        name,
+        arch: Architecture::DpT,
         size: ModelSize::Ti,
+        layers,
         attention: Attention::Causal,
-        what: "ScaleDP-Ti, causal attention (the DP-T-style ablation)",
-    },
-    Arm {
-        name: "s",
-        size: ModelSize::S,
-        attention: Attention::NonCausal,
-        what: "ScaleDP-S, non-causal attention",
-    },
+        what,
+    }
+}
+
+/// Every arm, the recipe's first.
+pub const ARMS: [Arm; 6] = [
+    scaledp(
+        "ti",
+        ModelSize::Ti,
+        Attention::NonCausal,
+        "ScaleDP-Ti, non-causal attention (the recipe)",
+    ),
+    scaledp(
+        "ti-causal",
+        ModelSize::Ti,
+        Attention::Causal,
+        "ScaleDP-Ti, causal attention (the DP-T-style ablation)",
+    ),
+    scaledp(
+        "s",
+        ModelSize::S,
+        Attention::NonCausal,
+        "ScaleDP-S, non-causal attention",
+    ),
+    dpt(
+        "dp-t",
+        None,
+        "DP-T, diffusion_policy's transformer (8 layers, width 256, 4 heads; the paper's baseline)",
+    ),
+    dpt("dp-t-l12", Some(12), "DP-T with 12 layers"),
+    dpt("dp-t-l14", Some(14), "DP-T with 14 layers"),
 ];
 
 /// The arm named `name`.
 pub fn arm(name: &str) -> Option<Arm> {
     ARMS.iter().copied().find(|a| a.name == name)
+}
+
+/// The arms' names, for error messages.
+pub fn names() -> String {
+    ARMS.iter().map(|a| a.name).collect::<Vec<_>>().join(", ")
 }

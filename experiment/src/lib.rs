@@ -15,6 +15,7 @@
 
 mod args;
 mod arms;
+mod benchmark;
 mod evaluate;
 mod plot;
 mod results;
@@ -27,7 +28,7 @@ use anyhow::{bail, Context, Result};
 use scaledp_deploy::Split;
 use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
 
-pub use args::{CompareArgs, ExperimentCommand, ReportArgs};
+pub use args::{Benchmark, CompareArgs, ExperimentCommand, ReportArgs};
 pub use arms::{Arm, ARMS};
 pub use results::{ArmResult, EvalFigures};
 
@@ -39,16 +40,66 @@ use results::{Controls, Provenance, ValPoint};
 pub fn run(command: ExperimentCommand, stop: &Arc<AtomicBool>) -> Result<()> {
     match command {
         ExperimentCommand::Compare(a) => compare(&a, stop),
-        ExperimentCommand::Report(a) => rebuild(&a.results.join(&a.name)).map(|_| ()),
+        ExperimentCommand::Report(a) => {
+            let dir = a.results.join(&a.name);
+            if benchmark::is_benchmark(&dir) {
+                benchmark::rebuild(&dir)
+            } else {
+                rebuild(&dir).map(|_| ())
+            }
+        }
+    }
+}
+
+/// The command's settings with the defaults of its kind (one dataset, or a benchmark) filled in.
+#[derive(Debug, Clone)]
+pub(crate) struct Settings {
+    name: String,
+    arms: Vec<Arm>,
+    preset: String,
+    val_episodes: u64,
+    live_episodes: u64,
+}
+
+impl Settings {
+    fn of(a: &CompareArgs) -> Result<Self> {
+        let bench = a.benchmark.is_some();
+        let arms = if a.arms.is_empty() {
+            if bench {
+                vec!["ti".to_string(), "dp-t".to_string()]
+            } else {
+                vec!["ti".into(), "ti-causal".into(), "s".into()]
+            }
+        } else {
+            a.arms.clone()
+        };
+        Ok(Settings {
+            name: a
+                .name
+                .clone()
+                .unwrap_or_else(|| if bench { "metaworld" } else { "cpu-sim" }.into()),
+            arms: arms
+                .iter()
+                .map(|n| {
+                    arms::arm(n).with_context(|| format!("--arms {n}: one of {}", arms::names()))
+                })
+                .collect::<Result<_>>()?,
+            preset: a
+                .preset
+                .clone()
+                .unwrap_or_else(|| if bench { "cpu-metaworld" } else { "cpu-sim" }.into()),
+            val_episodes: a.val_episodes.unwrap_or(if bench { 0 } else { 20 }),
+            live_episodes: a.live_episodes.unwrap_or(if bench { 0 } else { 20 }),
+        })
     }
 }
 
 /// The recipe with the command's overrides.
-fn recipe(a: &CompareArgs) -> Result<TrainOptions> {
-    let mut o = TrainOptions::preset(&a.preset).with_context(|| {
+fn recipe(a: &CompareArgs, s: &Settings) -> Result<TrainOptions> {
+    let mut o = TrainOptions::preset(&s.preset).with_context(|| {
         format!(
             "--preset {}: one of {}",
-            a.preset,
+            s.preset,
             scaledp_policy::PRESETS.join(", ")
         )
     })?;
@@ -68,10 +119,10 @@ fn recipe(a: &CompareArgs) -> Result<TrainOptions> {
 }
 
 /// The command line that reproduces this run of `compare` for one arm.
-fn command(a: &CompareArgs, arm: &str) -> String {
+fn command(a: &CompareArgs, st: &Settings, dataset: &str, arm: &str) -> String {
     let mut s = format!(
-        "scaledp experiment compare --dataset {} --name {} --arms {arm} --preset {} --val-episodes {} --test-episodes {} --live-episodes {} --max-seconds {} --action-steps {}",
-        a.dataset, a.name, a.preset, a.val_episodes, a.test_episodes, a.live_episodes, a.max_seconds, a.action_steps
+        "scaledp experiment compare --dataset {dataset} --name {} --arms {arm} --preset {} --val-episodes {} --test-episodes {} --live-episodes {} --max-seconds {} --action-steps {}",
+        st.name, st.preset, st.val_episodes, a.test_episodes, st.live_episodes, a.max_seconds, a.action_steps
     );
     for (flag, v) in [
         ("--steps", a.steps),
@@ -91,25 +142,25 @@ fn command(a: &CompareArgs, arm: &str) -> String {
 }
 
 fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
-    let results_dir = a.results.join(&a.name);
-    let runs_dir = a.runs.join(&a.name);
+    let st = Settings::of(a)?;
+    if a.benchmark.is_some() {
+        return benchmark::run(a, &st, recipe(a, &st)?, stop);
+    }
+    let dataset = a.dataset.clone().context("--dataset (or --benchmark)")?;
+    let results_dir = a.results.join(&st.name);
+    let runs_dir = a.runs.join(&st.name);
     std::fs::create_dir_all(&results_dir)
         .with_context(|| format!("creating {}", results_dir.display()))?;
-    let base = recipe(a)?;
-    let arms = a
-        .arms
-        .iter()
-        .map(|n| arms::arm(n).with_context(|| format!("--arms {n}: one of ti, ti-causal, s")))
-        .collect::<Result<Vec<_>>>()?;
+    let base = recipe(a, &st)?;
     let plan = EvalPlan {
         max_seconds: a.max_seconds,
         action_steps: a.action_steps,
     };
-    for arm in arms {
+    for &arm in &st.arms {
         eprintln!("== arm {}: {}", arm.name, arm.what);
-        let opts = base.clone().model(arm.size).attention(arm.attention);
+        let opts = arm.options(base.clone());
         let run = runs_dir.join(arm.name);
-        let trained = train::train(&a.dataset, &run, opts.clone(), stop)?;
+        let trained = train::train(&dataset, &run, opts.clone(), stop)?;
         if trained.interrupted {
             eprintln!(
                 "stopped at step {}: the same command resumes it",
@@ -117,7 +168,7 @@ fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
             );
             return Ok(());
         }
-        let result = evaluate_arm(a, arm, &run, &opts, &plan, trained)?;
+        let result = evaluate_arm(a, &st, &dataset, arm, &run, &opts, &plan, trained)?;
         let path = results_dir.join(format!("{}.json", arm.name));
         std::fs::write(&path, serde_json::to_vec_pretty(&result)?)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -134,8 +185,11 @@ fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
     Ok(())
 }
 
+#[allow(clippy::too_many_arguments)]
 fn evaluate_arm(
     a: &CompareArgs,
+    st: &Settings,
+    dataset: &str,
     arm: Arm,
     run: &std::path::Path,
     opts: &TrainOptions,
@@ -145,7 +199,7 @@ fn evaluate_arm(
     let ckpts = evaluate::checkpoints(run)?;
     let mut validation = Vec::new();
     for (step, dir) in &ckpts {
-        let r = evaluate::checkpoint(dir, None, Kind::Policy, Split::Val, a.val_episodes, plan)?;
+        let r = evaluate::checkpoint(dir, None, Kind::Policy, Split::Val, st.val_episodes, plan)?;
         eprintln!(
             "  step {step}: {}/{} on the validation seeds",
             r.successes,
@@ -207,13 +261,13 @@ fn evaluate_arm(
         )?;
         controls.scripted_expert = Some(EvalFigures::of(&r));
     }
-    let live = if recipe_arm && a.live_episodes > 0 {
+    let live = if recipe_arm && st.live_episodes > 0 {
         let r = evaluate::checkpoint(
             &best,
             Some(&rig),
             Kind::Live,
             Split::Test,
-            a.live_episodes,
+            st.live_episodes,
             plan,
         )?;
         Some(EvalFigures::of(&r))
@@ -226,20 +280,10 @@ fn evaluate_arm(
     Ok(ArmResult {
         arm: arm.name.into(),
         what: arm.what.into(),
-        command: command(a, arm.name),
-        train_command: format!(
-            "scaledp train {} --preset {} --model {} --attention {} --steps {} --checkpoint-every {} --batch-size {} --out {}",
-            a.dataset,
-            a.preset,
-            arm.size,
-            arm.attention,
-            opts.get_steps(),
-            opts.get_checkpoint_every(),
-            opts.get_batch_size(),
-            run.display()
-        ),
+        command: command(a, st, dataset, arm.name),
+        train_command: train_command(dataset, &st.preset, arm, opts, run),
         train_options: serde_json::to_value(opts)?,
-        dataset: a.dataset.clone(),
+        dataset: dataset.to_string(),
         steps: trained.steps,
         train_hours: trained.hours,
         step_s: times.iter().sum::<f64>() / times.len().max(1) as f64,
@@ -260,6 +304,31 @@ fn evaluate_arm(
             finished_utc: results::now_utc(),
         },
     })
+}
+
+/// The `scaledp train` command equivalent to an arm's run.
+fn train_command(
+    dataset: &str,
+    preset: &str,
+    arm: Arm,
+    opts: &TrainOptions,
+    run: &std::path::Path,
+) -> String {
+    let model = match arm.arch {
+        scaledp_policy::Architecture::DpT => "dp-t".to_string(),
+        scaledp_policy::Architecture::ScaleDp => arm.size.to_string(),
+    };
+    let layers = arm
+        .layers
+        .map_or(String::new(), |l| format!(" --layers {l}"));
+    format!(
+        "scaledp train {dataset} --preset {preset} --model {model}{layers} --attention {} --steps {} --checkpoint-every {} --batch-size {} --out {}",
+        arm.attention,
+        opts.get_steps(),
+        opts.get_checkpoint_every(),
+        opts.get_batch_size(),
+        run.display()
+    )
 }
 
 /// Rebuilds `table.md` and `success_vs_step.svg` in `dir` from the arm results there.

@@ -9,7 +9,8 @@
 - A command is a TCP target in the base frame (MetaWorld's world frame) and a gripper opening.
   MetaWorld moves a mocap body by at most 1 cm per step toward it (its action is the
   displacement / 1 cm, clipped to [-1, 1]); the hand's orientation is fixed by MetaWorld
-  (mocap quaternion [1, 0, 1, 0]), so the orientation of a target is ignored. The gripper's
+  (mocap quaternion [1, 0, 1, 0], the identity in the rig's TCP frame), so the orientation of a
+  target is ignored. The gripper's
   action (+1 closes, -1 opens) maps to an opening command linearly: ``width = 0.094 (1 - a) /
   2`` (0.094 m: the fingers' pads fully open).
 - The expert is MetaWorld's scripted policy (``metaworld.policies``); its action is reported as
@@ -167,8 +168,11 @@ class MetaWorldEnv:
         a[3] = np.clip(a[3], -1.0, 1.0)
         env = self.env
         target = np.clip(env.data.mocap_pos[0] + a[:3] * env.action_scale, env.mocap_low, env.mocap_high)
-        quat = np.array([1.0, 0.0, 1.0, 0.0]) / np.sqrt(2.0)
-        command = {"pose": target.tolist() + quat.tolist(),
+        # The TCP target's orientation: MetaWorld's fixed hand orientation (mocap quaternion
+        # [1, 0, 1, 0]) in the rig's TCP frame (the hand turned -90 degrees about y) is the
+        # identity.
+        quat = [1.0, 0.0, 0.0, 0.0]
+        command = {"pose": target.tolist() + quat,
                    "gripper_width_m": float(OPEN_WIDTH_M * (1.0 - a[3]) / 2.0)}
         self._last_grip = a[3]
         header, blobs = self._act(a, req.get("render", True))

@@ -1,0 +1,349 @@
+//! `scaledp experiment compare --benchmark metaworld --tasks …`: the comparison on a simulation
+//! benchmark, task by task. Per task: `--demos` successful demonstrations by the simulator's
+//! scripted expert (`scaledp collect --rig metaworld/<task> --successes N`, seeds from 0),
+//! converted at the rig's image size; every arm trained with the one recipe, its last
+//! checkpoint scored on the test seeds; the controls beside it (the scripted expert on the same
+//! seeds, the first arm's untrained weights and its cameras frozen). Each (task, arm) resumes
+//! where it stopped and lands its JSON as it finishes; the table (by difficulty level) and the
+//! plot are rebuilt from the files that are there.
+
+mod report;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use scaledp_deploy::Split;
+use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
+use scaledp_schema::benchmarks::metaworld_difficulty;
+use scaledp_schema::Rig;
+use serde::{Deserialize, Serialize};
+
+pub(crate) use report::{is_benchmark, rebuild};
+
+use crate::arms::Arm;
+use crate::evaluate::{self, EvalPlan, Kind};
+use crate::results::{self, Controls, EvalFigures, Provenance};
+use crate::{train, CompareArgs, Settings};
+
+/// One (task, arm) result: `RESULTS/NAME/<task>--<arm>.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TaskResult {
+    /// `metaworld`.
+    pub benchmark: String,
+    /// The task (`assembly`).
+    pub task: String,
+    /// Its difficulty level (`easy`, `medium`, `hard`, `very hard`).
+    pub level: String,
+    /// The arm (`ti`, `dp-t`).
+    pub arm: String,
+    /// What it is.
+    pub what: String,
+    /// Test-seed success rate of the last checkpoint (0–1): the reported figure.
+    pub test_success_rate: f64,
+    /// The test seeds.
+    pub test_seeds: Vec<u64>,
+    /// 95 % Wilson interval of the test success rate.
+    pub wilson_low: f64,
+    /// 95 % Wilson interval of the test success rate.
+    pub wilson_high: f64,
+    /// The test evaluation in full.
+    pub test: EvalFigures,
+    /// Hours of training (Σ of the steps' wall times).
+    pub train_hours: f64,
+    /// Optimizer steps.
+    pub steps: u64,
+    /// Mean wall time of a step (s).
+    pub step_s: f64,
+    /// The checkpoint scored.
+    pub checkpoint: String,
+    /// Denoiser parameters.
+    pub denoiser_params: usize,
+    /// Encoder parameters.
+    pub encoder_params: usize,
+    /// Successful demonstrations trained on.
+    pub demonstrations: u64,
+    /// The command that produced this file.
+    pub command: String,
+    /// The equivalent `scaledp train` command.
+    pub train_command: String,
+    /// The training settings.
+    pub train_options: serde_json::Value,
+    /// The revision the run was trained at (recorded when training started).
+    pub train_revision: String,
+    /// The simulator's packages (`metaworld`, `mujoco`).
+    pub simulator: std::collections::BTreeMap<String, String>,
+    /// Where and what ran (the revision that scored it).
+    pub provenance: Provenance,
+}
+
+/// A task's controls: `RESULTS/NAME/<task>--controls.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TaskControls {
+    /// The task.
+    pub task: String,
+    /// Its level.
+    pub level: String,
+    /// The arm whose checkpoints the untrained and frozen controls use.
+    pub arm: String,
+    /// The controls.
+    pub controls: Controls,
+    /// Where and what ran.
+    pub provenance: Provenance,
+}
+
+/// The file of (task, arm).
+fn result_path(dir: &Path, task: &str, arm: &str) -> PathBuf {
+    dir.join(format!("{task}--{arm}.json"))
+}
+
+/// Successful episodes listed in a `collect.jsonl`, and the next unused seed.
+fn collected(demos: &Path) -> (u64, u64) {
+    let text = std::fs::read_to_string(demos.join("collect.jsonl")).unwrap_or_default();
+    let (mut ok, mut next) = (0, 0);
+    for v in text
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+    {
+        ok += u64::from(v["outcome"] == "success" && v["episode"].is_string());
+        next = next.max(v["seed"].as_u64().map_or(0, |s| s + 1));
+    }
+    (ok, next)
+}
+
+/// Runs `scaledp <args>` (this executable), failing with its status.
+fn scaledp(args: &[&str]) -> Result<()> {
+    let exe = std::env::current_exe().context("finding the scaledp executable")?;
+    eprintln!("  $ scaledp {}", args.join(" "));
+    let status = Command::new(&exe)
+        .args(args)
+        .status()
+        .with_context(|| format!("running {}", exe.display()))?;
+    // 3: finished but lost data (a recording dropped messages) — still a dataset to check.
+    if !(status.success() || status.code() == Some(3)) {
+        bail!("scaledp {} failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
+
+/// The task's dataset: `demos` successful demonstrations collected and converted (whatever of
+/// that is already there is kept).
+fn prepare(rig: &Rig, dir: &Path, demos: u64) -> Result<(PathBuf, u64)> {
+    let ds = dir.join("dataset");
+    let rec = dir.join("demos");
+    let (mut ok, next) = collected(&rec);
+    if ds.join("meta/info.json").exists() {
+        return Ok((ds, ok));
+    }
+    if ok < demos {
+        let (n, seed) = ((demos - ok).to_string(), next.to_string());
+        let out = rec.display().to_string();
+        scaledp(&[
+            "collect",
+            "--rig",
+            &rig.name,
+            "--successes",
+            &n,
+            "--seed",
+            &seed,
+            "--out",
+            &out,
+        ])?;
+        ok = collected(&rec).0;
+        if ok < demos {
+            bail!("{}: {ok} successful demonstrations of {demos}", rig.name);
+        }
+    }
+    let cam = rig.cameras.first().context("the rig has no camera")?;
+    let size = format!("{}x{}", cam.width, cam.height);
+    let partial = dir.join("dataset.partial");
+    let _ = std::fs::remove_dir_all(&partial);
+    let (src, dst) = (rec.display().to_string(), partial.display().to_string());
+    scaledp(&["convert", &src, "--out", &dst, "--size", &size])?;
+    std::fs::rename(&partial, &ds).with_context(|| format!("finishing {}", ds.display()))?;
+    Ok((ds, ok))
+}
+
+/// The revision a run was trained at: written beside it when its training starts.
+fn train_revision(run: &Path) -> Result<String> {
+    let path = run.join("REVISION");
+    if let Ok(r) = std::fs::read_to_string(&path) {
+        return Ok(r.trim().to_string());
+    }
+    std::fs::create_dir_all(run).with_context(|| format!("creating {}", run.display()))?;
+    let r = results::git_revision();
+    std::fs::write(&path, format!("{r}\n"))
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(r)
+}
+
+/// Runs the benchmark comparison of `a`.
+pub(crate) fn run(
+    a: &CompareArgs,
+    st: &Settings,
+    base: TrainOptions,
+    stop: &Arc<AtomicBool>,
+) -> Result<()> {
+    if a.tasks.is_empty() {
+        bail!("--benchmark metaworld needs --tasks (MetaWorld task names, comma-separated)");
+    }
+    let results_dir = a.results.join(&st.name);
+    std::fs::create_dir_all(&results_dir)
+        .with_context(|| format!("creating {}", results_dir.display()))?;
+    let plan = EvalPlan {
+        max_seconds: a.max_seconds,
+        action_steps: a.action_steps,
+    };
+    for task in &a.tasks {
+        let level = metaworld_difficulty(task)
+            .with_context(|| format!("--tasks {task}: not one of MetaWorld's 50 tasks"))?;
+        let rig = Rig::load_or_builtin(&format!("metaworld/{task}"))?;
+        let task_dir = a.runs.join(&st.name).join(task);
+        eprintln!("== task {task} ({})", level.label());
+        let (dataset, demos) = prepare(&rig, &task_dir, a.demos)?;
+        let dataset = dataset.display().to_string();
+        for &arm in &st.arms {
+            let path = result_path(&results_dir, task, arm.name);
+            if path.exists() {
+                continue;
+            }
+            eprintln!("== {task}: arm {}: {}", arm.name, arm.what);
+            let opts = arm.options(base.clone());
+            let run = task_dir.join(arm.name);
+            let revision = train_revision(&run)?;
+            let trained = train::train(&dataset, &run, opts.clone(), stop)?;
+            if trained.interrupted {
+                eprintln!(
+                    "stopped at step {}: the same command resumes it",
+                    trained.steps
+                );
+                return Ok(());
+            }
+            let (_, last) = evaluate::checkpoints(&run)?
+                .pop()
+                .context("the run has no checkpoint")?;
+            let test = evaluate::checkpoint(
+                &last,
+                Some(&rig),
+                Kind::Policy,
+                Split::Test,
+                a.test_episodes,
+                &plan,
+            )?;
+            let policy = Policy::load(&last, &candle_core::Device::Cpu)?;
+            let counts = ScaleDp::count(&policy.config().model)?;
+            let times = train::step_times(&run)?;
+            let figures = EvalFigures::of(&test);
+            let result = TaskResult {
+                benchmark: "metaworld".into(),
+                task: task.clone(),
+                level: level.label().into(),
+                arm: arm.name.into(),
+                what: arm.what.into(),
+                test_success_rate: figures.success_rate,
+                test_seeds: (0..a.test_episodes).map(|i| test.seed + i).collect(),
+                wilson_low: figures.wilson_low,
+                wilson_high: figures.wilson_high,
+                test: figures,
+                train_hours: trained.hours,
+                steps: trained.steps,
+                step_s: times.iter().sum::<f64>() / times.len().max(1) as f64,
+                checkpoint: last.display().to_string(),
+                denoiser_params: counts.denoiser,
+                encoder_params: counts.encoders,
+                demonstrations: demos,
+                command: command(a, st, task, arm),
+                train_command: crate::train_command(&dataset, &st.preset, arm, &opts, &run),
+                train_options: serde_json::to_value(&opts)?,
+                train_revision: revision,
+                simulator: test.simulator.clone().unwrap_or_default(),
+                provenance: provenance(),
+            };
+            std::fs::write(&path, serde_json::to_vec_pretty(&result)?)
+                .with_context(|| format!("writing {}", path.display()))?;
+            println!(
+                "{task} {}: test {} after {} steps ({:.2} h of training); {}",
+                arm.name,
+                result.test.cell(),
+                result.steps,
+                result.train_hours,
+                path.display()
+            );
+            rebuild(&results_dir)?;
+        }
+        if !a.no_controls {
+            if let Some(&first) = st.arms.first() {
+                controls(
+                    a,
+                    &rig,
+                    task,
+                    level.label(),
+                    first,
+                    &task_dir,
+                    &results_dir,
+                    &plan,
+                )?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The controls of a task, once its first arm has trained.
+#[allow(clippy::too_many_arguments)]
+fn controls(
+    a: &CompareArgs,
+    rig: &Rig,
+    task: &str,
+    level: &str,
+    arm: Arm,
+    task_dir: &Path,
+    results_dir: &Path,
+    plan: &EvalPlan,
+) -> Result<()> {
+    let path = results_dir.join(format!("{task}--controls.json"));
+    if path.exists() {
+        return Ok(());
+    }
+    let ckpts = evaluate::checkpoints(&task_dir.join(arm.name))?;
+    let (Some((0, untrained)), Some((_, last))) = (ckpts.first(), ckpts.last()) else {
+        return Ok(());
+    };
+    eprintln!("== {task}: controls");
+    let n = a.controls_episodes;
+    let expert = evaluate::expert(task_dir, rig, Split::Test, a.test_episodes, plan)?;
+    let untrained = evaluate::checkpoint(untrained, Some(rig), Kind::Policy, Split::Test, n, plan)?;
+    let frozen = evaluate::checkpoint(last, Some(rig), Kind::Frozen, Split::Test, n, plan)?;
+    let c = TaskControls {
+        task: task.into(),
+        level: level.into(),
+        arm: arm.name.into(),
+        controls: Controls {
+            untrained: Some(EvalFigures::of(&untrained)),
+            frozen_cameras: Some(EvalFigures::of(&frozen)),
+            scripted_expert: Some(EvalFigures::of(&expert)),
+        },
+        provenance: provenance(),
+    };
+    std::fs::write(&path, serde_json::to_vec_pretty(&c)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    rebuild(results_dir)
+}
+
+fn provenance() -> Provenance {
+    Provenance {
+        git_revision: results::git_revision(),
+        machine: results::machine(),
+        finished_utc: results::now_utc(),
+    }
+}
+
+/// The command line that reproduces one (task, arm).
+fn command(a: &CompareArgs, st: &Settings, task: &str, arm: Arm) -> String {
+    format!(
+        "scaledp experiment compare --benchmark metaworld --tasks {task} --arms {} --name {} --preset {} --demos {} --test-episodes {} --controls-episodes {} --max-seconds {} --action-steps {}",
+        arm.name, st.name, st.preset, a.demos, a.test_episodes, a.controls_episodes, a.max_seconds, a.action_steps
+    )
+}

@@ -1,0 +1,301 @@
+//! A benchmark's table (`table.md`: per task and arm the test success with its interval, the
+//! controls, and per difficulty level the mean over its tasks) and plot
+//! (`success_by_level.svg`), rebuilt from the (task, arm) files in the results directory.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{anyhow, bail, Context, Result};
+use plotters::prelude::*;
+use scaledp_schema::benchmarks::Difficulty;
+
+use super::{TaskControls, TaskResult};
+use crate::arms::ARMS;
+use crate::results::EvalFigures;
+
+/// Whether `dir` holds a benchmark's results (files named `<task>--<arm>.json`).
+pub(crate) fn is_benchmark(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|d| {
+        d.filter_map(|e| e.ok())
+            .any(|e| e.file_name().to_string_lossy().contains("--"))
+    })
+}
+
+struct Loaded {
+    results: Vec<TaskResult>,
+    controls: BTreeMap<String, TaskControls>,
+}
+
+fn load(dir: &Path) -> Result<Loaded> {
+    let mut results = Vec::new();
+    let mut controls = BTreeMap::new();
+    let mut names: Vec<_> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension().is_some_and(|x| x == "json")
+                && p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().contains("--"))
+        })
+        .collect();
+    names.sort();
+    for path in names {
+        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+        if path.to_string_lossy().ends_with("--controls.json") {
+            let c: TaskControls = serde_json::from_slice(&bytes)
+                .with_context(|| format!("{}: not a task's controls", path.display()))?;
+            controls.insert(c.task.clone(), c);
+        } else {
+            results.push(
+                serde_json::from_slice(&bytes)
+                    .with_context(|| format!("{}: not a task result", path.display()))?,
+            );
+        }
+    }
+    Ok(Loaded { results, controls })
+}
+
+fn level_of(label: &str) -> Difficulty {
+    Difficulty::ALL
+        .into_iter()
+        .find(|d| d.label() == label)
+        .unwrap_or(Difficulty::Easy)
+}
+
+/// The arms present, in the arms' order.
+fn arms_of(results: &[TaskResult]) -> Vec<&'static str> {
+    ARMS.iter()
+        .map(|a| a.name)
+        .filter(|n| results.iter().any(|r| r.arm == *n))
+        .collect()
+}
+
+fn pct(f: &EvalFigures) -> String {
+    format!(
+        "{:.0} % ({}/{}, {:.0}–{:.0})",
+        100.0 * f.success_rate,
+        f.successes,
+        f.episodes,
+        100.0 * f.wilson_low,
+        100.0 * f.wilson_high
+    )
+}
+
+/// Rebuilds `table.md` and `success_by_level.svg` in `dir`.
+pub(crate) fn rebuild(dir: &Path) -> Result<()> {
+    let l = load(dir)?;
+    if l.results.is_empty() {
+        bail!("{}: no task results yet", dir.display());
+    }
+    let arms = arms_of(&l.results);
+    let mut tasks: Vec<(Difficulty, String)> = l
+        .results
+        .iter()
+        .map(|r| (level_of(&r.level), r.task.clone()))
+        .collect();
+    tasks.sort();
+    tasks.dedup();
+    let get = |task: &str, arm: &str| l.results.iter().find(|r| r.task == task && r.arm == arm);
+    let mut md = String::from(
+        "# Results\n\nRebuilt by `scaledp experiment report` from the files beside it: test-seed \
+         success of each arm's last checkpoint (seeds 2 000 000 …, 95 % Wilson interval), and the \
+         controls.\n\n",
+    );
+    md.push_str("| level | task |");
+    for a in &arms {
+        md.push_str(&format!(" {a} |"));
+    }
+    md.push_str(" scripted expert | untrained | cameras frozen |\n|---|---|");
+    md.push_str(&"---|".repeat(arms.len() + 3));
+    md.push('\n');
+    for (level, task) in &tasks {
+        md.push_str(&format!("| {} | {task} |", level.label()));
+        for a in &arms {
+            md.push_str(&format!(
+                " {} |",
+                get(task, a).map_or("–".into(), |r| pct(&r.test))
+            ));
+        }
+        let c = l.controls.get(task).map(|c| &c.controls);
+        for f in [
+            c.and_then(|c| c.scripted_expert.as_ref()),
+            c.and_then(|c| c.untrained.as_ref()),
+            c.and_then(|c| c.frozen_cameras.as_ref()),
+        ] {
+            md.push_str(&format!(" {} |", f.map_or("–".into(), pct)));
+        }
+        md.push('\n');
+    }
+    md.push_str(
+        "\nMean over each level's tasks (tasks where every arm has a result):\n\n| level | tasks |",
+    );
+    for a in &arms {
+        md.push_str(&format!(" {a} |"));
+    }
+    md.push_str("\n|---|---|");
+    md.push_str(&"---|".repeat(arms.len()));
+    md.push('\n');
+    for (level, means) in level_means(&tasks, &arms, &get) {
+        let (n, values) = means;
+        md.push_str(&format!("| {} | {n} |", level.label()));
+        for v in values {
+            md.push_str(&format!(" {:.1} % |", 100.0 * v));
+        }
+        md.push('\n');
+    }
+    md.push_str("\n| task | arm | steps | training | s/step | inference p50 / p99 | trained at | scored at | machine |\n|---|---|---|---|---|---|---|---|---|\n");
+    for (_, task) in &tasks {
+        for a in &arms {
+            if let Some(r) = get(task, a) {
+                let ms = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.0}"));
+                md.push_str(&format!(
+                    "| {task} | {a} | {} | {:.2} h | {:.2} | {} / {} ms | `{}` | `{}` | {} |\n",
+                    r.steps,
+                    r.train_hours,
+                    r.step_s,
+                    ms(r.test.inference_ms_p50),
+                    ms(r.test.inference_ms_p99),
+                    short(&r.train_revision),
+                    short(&r.provenance.git_revision),
+                    r.provenance.machine
+                ));
+            }
+        }
+    }
+    if let Some(r) = l.results.first() {
+        md.push_str(&format!(
+            "\nSimulator: {}. Every (task, arm) reproduces with the `command` of its JSON file.\n",
+            r.simulator
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    std::fs::write(dir.join("table.md"), md)
+        .with_context(|| format!("writing {}/table.md", dir.display()))?;
+    plot(&tasks, &arms, &get, &dir.join("success_by_level.svg"))?;
+    eprintln!(
+        "rebuilt {}/table.md and success_by_level.svg",
+        dir.display()
+    );
+    Ok(())
+}
+
+fn short(rev: &str) -> String {
+    rev.get(..10).map_or(rev.to_string(), |s| {
+        if rev.ends_with("-dirty") {
+            format!("{s}-dirty")
+        } else {
+            s.to_string()
+        }
+    })
+}
+
+type Means = Vec<(Difficulty, (usize, Vec<f64>))>;
+
+/// Per level: the tasks where every arm has a result, and each arm's mean over them.
+fn level_means<'a>(
+    tasks: &[(Difficulty, String)],
+    arms: &[&str],
+    get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
+) -> Means {
+    let mut out = Vec::new();
+    for level in Difficulty::ALL {
+        let full: Vec<&String> = tasks
+            .iter()
+            .filter(|(l, t)| *l == level && arms.iter().all(|a| get(t, a).is_some()))
+            .map(|(_, t)| t)
+            .collect();
+        if full.is_empty() {
+            continue;
+        }
+        let means = arms
+            .iter()
+            .map(|a| {
+                full.iter()
+                    .filter_map(|t| get(t, a))
+                    .map(|r| r.test_success_rate)
+                    .sum::<f64>()
+                    / full.len() as f64
+            })
+            .collect();
+        out.push((level, (full.len(), means)));
+    }
+    out
+}
+
+const COLOURS: [RGBColor; 4] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+];
+
+/// Grouped bars: per level, each arm's mean test success.
+fn plot<'a>(
+    tasks: &[(Difficulty, String)],
+    arms: &[&str],
+    get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
+    path: &Path,
+) -> Result<()> {
+    let means = level_means(tasks, arms, get);
+    let err = |e: String| anyhow!("plot: {e}");
+    let root = SVGBackend::new(path, (800, 460)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+    let groups = means.len().max(1) as f64;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "MetaWorld: test success by difficulty level",
+            ("sans-serif", 20),
+        )
+        .margin(16)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0f64..groups, 0f64..1.0)
+        .map_err(|e| err(e.to_string()))?;
+    let labels: Vec<String> = means
+        .iter()
+        .map(|(l, (n, _))| format!("{} ({n} tasks)", l.label()))
+        .collect();
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(means.len().max(1))
+        .x_label_formatter(&|x| {
+            labels
+                .get(x.floor() as usize)
+                .filter(|_| (x.fract() - 0.5).abs() < 1e-6)
+                .cloned()
+                .unwrap_or_default()
+        })
+        .y_desc("mean test success rate")
+        .draw()
+        .map_err(|e| err(e.to_string()))?;
+    let width = 0.8 / arms.len().max(1) as f64;
+    for (k, arm) in arms.iter().enumerate() {
+        let c = COLOURS[k % COLOURS.len()];
+        let bars: Vec<Rectangle<(f64, f64)>> = means
+            .iter()
+            .enumerate()
+            .map(|(g, (_, (_, v)))| {
+                let x0 = g as f64 + 0.1 + k as f64 * width;
+                Rectangle::new([(x0, 0.0), (x0 + width * 0.9, v[k])], c.filled())
+            })
+            .collect();
+        chart
+            .draw_series(bars)
+            .map_err(|e| err(e.to_string()))?
+            .label(arm.to_string())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| err(e.to_string()))?;
+    root.present().map_err(|e| err(e.to_string()))?;
+    Ok(())
+}
