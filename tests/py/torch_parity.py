@@ -18,7 +18,7 @@ import sys
 import torch
 from safetensors.torch import load_file
 
-from scaledp_data.policy import DenoisingLoss, NoiseScheduler, ScaleDPPolicy, loss_terms
+from scaledp_data.policy import DenoisingLoss, NoiseScheduler, build_policy, loss_terms
 
 GROUPS = [
     ("encoder trunks", lambda n: n.startswith("obs_encoder.") and ".backbone." in n),
@@ -29,6 +29,15 @@ GROUPS = [
     ("mlp (fc1, fc2)", lambda n: ".mlp." in n and n.startswith("blocks.")),
     ("adaLN modulation", lambda n: n.startswith("blocks.") and "adaLN" in n),
     ("final layer", lambda n: n.startswith("final_layer.")),
+    # DP-T (diffusion_policy's module names under model.).
+    ("dp-t embeddings (input, pos, cond obs, cond pos)",
+     lambda n: n.split(".")[:2] in (["model", "input_emb"], ["model", "pos_emb"],
+                                    ["model", "cond_obs_emb"], ["model", "cond_pos_emb"])),
+    ("dp-t condition MLP", lambda n: n.startswith("model.encoder.")),
+    ("dp-t self-attention", lambda n: ".self_attn." in n),
+    ("dp-t cross-attention", lambda n: ".multihead_attn." in n),
+    ("dp-t FFN (linear1, linear2)", lambda n: ".linear1." in n or ".linear2." in n),
+    ("dp-t norms, ln_f, head", lambda n: n.startswith("model.")),
 ]
 
 
@@ -43,7 +52,7 @@ def main():
     case = json.load(open(os.path.join(d, "case.json")))
     cfg, spec = case["model"], case["loss"]
     torch.manual_seed(0)
-    policy = ScaleDPPolicy(cfg)
+    policy = build_policy(cfg)
     policy.load_state_dict(load_file(os.path.join(d, "model.safetensors")), strict=True)
     t = load_file(os.path.join(d, "case.safetensors"))
     pad = t["action_is_pad"].bool()

@@ -15,14 +15,14 @@ import numpy as np
 import torch
 from safetensors.torch import load_file
 
-from scaledp_data.policy import NoiseScheduler, ScaleDPPolicy, ddim_sample, read_config
+from scaledp_data.policy import ImagePolicy, NoiseScheduler, ddim_sample, read_config
 
 
 def main():
     """Predicts the chunks of the case and prints them."""
     ckpt, case = sys.argv[1], sys.argv[2]
     cfg = read_config(ckpt)
-    policy = ScaleDPPolicy.from_checkpoint(ckpt).eval()
+    policy = ImagePolicy.from_checkpoint(ckpt).eval()  # ScaleDP or DP-T, as config.json says
     t = load_file(case)
     norm = cfg["normalizer"]
     s_scale, s_off = (np.asarray(norm["state"][k], dtype=np.float64) for k in ("scale", "offset"))

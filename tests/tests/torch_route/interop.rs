@@ -26,8 +26,14 @@ fn torch_checkpoint() -> std::path::PathBuf {
 
 #[test]
 fn a_torch_trained_checkpoint_acts_in_rust_as_the_torch_module_samples_it() {
-    let ckpt = torch_checkpoint();
-    let policy = Policy::load(&ckpt, &Device::Cpu).unwrap();
+    let worst = rust_vs_torch_chunks(&torch_checkpoint());
+    assert!(worst <= 1e-4, "{worst}");
+}
+
+/// The largest difference (normalized units) between the chunks `Policy::predict_batch` and
+/// the PyTorch module's DDIM-10 sample for 4 dataset observations from the same starting noise.
+pub(crate) fn rust_vs_torch_chunks(ckpt: &Path) -> f64 {
+    let policy = Policy::load(ckpt, &Device::Cpu).unwrap();
     let m = policy.config().model.clone();
     // Raw observations (un-normalized state) of 4 dataset samples.
     let mut loader = LoaderOptions::default()
@@ -66,7 +72,7 @@ fn a_torch_trained_checkpoint_acts_in_rust_as_the_torch_module_samples_it() {
     let path = fixture().dir.join("predict-case.safetensors");
     candle_core::safetensors::save(&case, &path).unwrap();
     let mut cmd = py();
-    cmd.arg(script("torch_predict.py")).arg(&ckpt).arg(&path);
+    cmd.arg(script("torch_predict.py")).arg(ckpt).arg(&path);
     let out = run_ok(cmd, LIMIT);
     let v: Value = serde_json::from_slice(&out.stdout).unwrap();
     let scale = &policy.config().normalizer.action.scale;
@@ -85,9 +91,10 @@ fn a_torch_trained_checkpoint_acts_in_rust_as_the_torch_module_samples_it() {
         }
     }
     eprintln!(
-        "torch checkpoint, DDIM-10 from the same noise: Rust vs PyTorch chunks differ by at most {worst:.2e} (normalized units) over {b} observations"
+        "{} torch checkpoint, DDIM-10 from the same noise: Rust vs PyTorch chunks differ by at most {worst:.2e} (normalized units) over {b} observations",
+        m.denoiser_name()
     );
-    assert!(worst <= 1e-4, "{worst}");
+    worst
 }
 
 #[test]
@@ -116,7 +123,7 @@ fn scaledp_eval_runs_a_torch_trained_checkpoint() {
 }
 
 /// Copies a run directory (its metrics, samples and checkpoints).
-fn copy_run(from: &Path, to: &Path) {
+pub(crate) fn copy_run(from: &Path, to: &Path) {
     let _ = std::fs::remove_dir_all(to);
     let st = std::process::Command::new("cp")
         .arg("-a")

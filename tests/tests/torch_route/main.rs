@@ -10,6 +10,7 @@
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
 mod ddp;
+mod dpt;
 mod interop;
 mod parity;
 mod recipes;

@@ -58,10 +58,16 @@ fn tiny_model(b: &Batch) -> ModelConfig {
     cfg
 }
 
-/// Runs one parity case and returns the PyTorch side's report.
+/// Runs one parity case of the tiny model and returns the PyTorch side's report.
 fn case(spec: LossSpec, micro: Option<usize>) -> Value {
+    case_of(|_| {}, spec, micro)
+}
+
+/// Runs one parity case of the tiny model as `edit` changes it (DP-T, say).
+pub(crate) fn case_of(edit: fn(&mut ModelConfig), spec: LossSpec, micro: Option<usize>) -> Value {
     let batch = padded_batch();
-    let cfg = tiny_model(&batch);
+    let mut cfg = tiny_model(&batch);
+    edit(&mut cfg);
     let model = ScaleDp::random(&cfg, 5, 0.1, &Device::Cpu).unwrap();
     let (seed, step) = (7u64, 3u64);
     let draws = step_draws(&cfg, 100, batch.len, spec, micro, seed, step);
