@@ -200,6 +200,9 @@ pub struct BenchTrainArgs {
     /// Samples per step (default 64, or the preset's).
     #[arg(long)]
     pub batch_size: Option<usize>,
+    /// Models timed, comma-separated: ti (ScaleDP-Ti), dp-t (the paper's baseline).
+    #[arg(long, value_delimiter = ',', default_value = "ti,dp-t")]
+    pub models: Vec<String>,
     /// Forward/backward at most this many samples at a time.
     #[arg(long)]
     pub micro_batch: Option<usize>,

@@ -1,10 +1,11 @@
-//! `scaledp bench train`: ScaleDP-Ti training throughput on this machine's cores — on a dataset
-//! converted from simulated recordings (2 cameras, images as the converter writes them unless
-//! `--image-size`, cropped to 0.9), To 2, C 16, batch 64 — with the share of step time spent
-//! waiting for the loader; the same step on a synthetic batch (compute only), and the same model
-//! in PyTorch (the wheel's `scaledp_data.policy`) on a synthetic batch from the same initial
-//! weights on the same threads (when the benchmark venv has torch); and DDIM-10 latency per
-//! action chunk for Ti and S.
+//! `scaledp bench train`: ScaleDP-Ti's and DP-T's training throughput on this machine's cores —
+//! on a dataset converted from simulated recordings (2 cameras, images as the converter writes
+//! them unless `--image-size`, cropped to 0.9), To 2, C 16, batch 64 — with the share of step
+//! time spent waiting for the loader; the same step on a synthetic batch (compute only), and the
+//! same model in PyTorch (the wheel's `scaledp_data.policy`) on a synthetic batch from the same
+//! initial weights on the same threads (when the benchmark venv has torch); each step's FLOPs
+//! (counted from the layer shapes) over its time beside this machine's FP32 matrix-multiply
+//! peak; and DDIM-10 latency per action chunk for Ti, S and DP-T.
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -15,7 +16,8 @@ use scaledp_converter::{ConvertOptions, InputResult, JobOptions};
 use scaledp_policy::bench::{
     ddim_latency, synthetic_step_profile, train_throughput, write_torch_case,
 };
-use scaledp_policy::{ModelConfig, ModelSize, Phases, TrainOptions, Trainer};
+use scaledp_policy::flops::{matmul_peak_gflops, step_flops};
+use scaledp_policy::{Architecture, ModelConfig, ModelSize, Phases, TrainOptions, Trainer};
 use scaledp_schema::Rig;
 use scaledp_testkit::BENCH_VENV;
 
@@ -35,13 +37,21 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     if args.steps == 0 || args.latency_runs == 0 || args.rounds == 0 {
         bail!("--steps, --latency-runs and --rounds must be at least 1");
     }
+    let archs = args
+        .models
+        .iter()
+        .map(|m| match m.as_str() {
+            "ti" => Ok(Architecture::ScaleDp),
+            "dp-t" | "dpt" => Ok(Architecture::DpT),
+            other => bail!("--models {other}: ti or dp-t"),
+        })
+        .collect::<Result<Vec<_>>>()?;
     let tmp = tempfile::tempdir().context("creating a temporary directory")?;
     let work = args.out.clone().unwrap_or_else(|| tmp.path().to_path_buf());
     let size = args.image_size.as_deref().map(parse_size).transpose()?;
     let dataset = make_dataset(&work, &args, size)?;
     let ds = dataset.to_string_lossy().to_string();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-
     let base = match &args.preset {
         Some(p) => TrainOptions::preset(p).with_context(|| {
             format!(
@@ -51,13 +61,65 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         })?,
         None => TrainOptions::default(),
     };
+    let peak = matmul_peak_gflops(1024, 5);
+    println!(
+        "this machine's FP32 matrix-multiply peak: {peak:.1} GFLOP/s on {threads} threads (the best of 6 products of two 1024×1024 matrices by the engine's GEMM)"
+    );
+    let mut cfg = None;
+    for arch in archs {
+        cfg = Some(model_round(&args, &ds, &work, base.clone(), arch, size, threads, peak)?);
+    }
+    let Some(cfg) = cfg else {
+        bail!("--models: name at least one of ti, dp-t");
+    };
+    let inputs = (
+        cfg.cameras.clone(),
+        (cfg.image_width, cfg.image_height),
+        cfg.state_dim,
+        cfg.action_dim,
+    );
+    let mut models = vec![
+        ModelConfig::new(ModelSize::Ti, inputs.0.clone(), inputs.1, inputs.2, inputs.3),
+        ModelConfig::new(ModelSize::S, inputs.0.clone(), inputs.1, inputs.2, inputs.3),
+        ModelConfig::dp_t(inputs.0, inputs.1, inputs.2, inputs.3),
+    ];
+    println!();
+    for c in &mut models {
+        c.obs_horizon = cfg.obs_horizon;
+        c.action_chunk = cfg.action_chunk;
+        let l = ddim_latency(c, 10, args.latency_runs, &Device::Cpu)?;
+        println!(
+            "DDIM-10 {:<10} per action chunk (batch 1, {} runs): p50 {:.1} ms (encoders {:.1} ms), p99 {:.1} ms (goal < 100 ms)",
+            c.denoiser_name(), l.runs, l.p50_ms, l.encode_p50_ms, l.p99_ms
+        );
+    }
+    Ok(Outcome::Completed)
+}
+
+/// One model's figures: the training throughput with the loader, then the synthetic step
+/// against PyTorch's for `--rounds` alternating rounds, each step's FLOPs over its time beside
+/// the machine's matrix-multiply peak. Returns the model's configuration.
+#[allow(clippy::too_many_arguments)]
+fn model_round(
+    args: &BenchTrainArgs,
+    ds: &str,
+    work: &Path,
+    base: TrainOptions,
+    arch: Architecture,
+    size: Option<(u32, u32)>,
+    threads: usize,
+    peak: f64,
+) -> Result<ModelConfig> {
     let batch = args.batch_size.unwrap_or(base.get_batch_size());
     let mut opts = base
-        .model(ModelSize::Ti)
+        .arch(arch)
         .batch_size(batch)
         .val_ratio(0.0)
         .val_every(0)
         .seed(0);
+    if arch == Architecture::ScaleDp {
+        opts = opts.model(ModelSize::Ti);
+    }
     let k = opts.get_loss().noise_samples;
     if let Some((w, h)) = size {
         opts = opts.image_size(w, h);
@@ -65,25 +127,27 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     if let Some(m) = args.micro_batch {
         opts = opts.micro_batch(m);
     }
-    let cfg = Trainer::plan(&ds, &opts)?.model;
+    let cfg = Trainer::plan(ds, &opts)?.model;
     let (cw, ch) = cfg.crop_size();
+    let flops = step_flops(&cfg, batch, k);
     println!(
-        "ScaleDP-Ti, {} cameras {}x{} cropped to {cw}x{ch}, ResNet width {}, state {}, action {}, To {}, C {}, batch {batch}, {k} noise draw(s) per observation, {threads} threads",
-        cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.resnet_width, cfg.state_dim, cfg.action_dim,
-        cfg.obs_horizon, cfg.action_chunk
+        "\n{}, {} cameras {}x{} cropped to {cw}x{ch}, ResNet width {}, state {}, action {}, To {}, C {}, batch {batch}, {k} noise draw(s) per observation, {threads} threads; a step is {:.1} GFLOP ({:.1} encoders, {:.1} denoiser; counted from the layer shapes)",
+        cfg.denoiser_name(), cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.resnet_width, cfg.state_dim, cfg.action_dim,
+        cfg.obs_horizon, cfg.action_chunk, flops.total() / 1e9, flops.encoders / 1e9, flops.denoiser / 1e9
     );
-
+    let share = |step_s: f64| flops.total() / step_s.max(1e-9) / 1e9 / peak.max(1e-9);
     eprintln!(
         "training {} + {} warm-up steps in Rust (CPU engine)…",
         args.steps, args.warmup
     );
     let spec = opts.get_loss();
-    let t = train_throughput(&ds, opts, args.warmup, args.steps, &Device::Cpu)?;
+    let t = train_throughput(ds, opts, args.warmup, args.steps, &Device::Cpu)?;
     println!(
-        "rust (CPU engine) {:>7.2} s/step  {:>7.2} samples/s  data wait {:.1} % of step time (goal < 5 %)",
+        "rust (CPU engine) {:>7.2} s/step  {:>7.2} samples/s  data wait {:.1} % of step time (goal < 5 %); {:.2} of the matmul peak",
         t.step_s,
         t.samples_per_s,
-        100.0 * t.data_wait_share
+        100.0 * t.data_wait_share,
+        share(t.step_s)
     );
     print_phases(
         &t.phases,
@@ -97,6 +161,7 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     // This machine's speed drifts by 10-20 % within minutes, so the two sides alternate for
     // `--rounds` rounds and the figure is the median of the rounds' ratios.
     let mut ratios = Vec::new();
+    let mut shares = Vec::new();
     for round in 1..=args.rounds {
         let s = synthetic_step_profile(
             &cfg,
@@ -108,20 +173,24 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
             0,
             false,
         )?;
+        shares.push(share(s.step_s));
         println!(
-            "round {round}: rust, synthetic batch {:>7.2} s/step  {:>7.2} samples/s  (compute only, as PyTorch's)",
+            "round {round}: rust, synthetic batch {:>7.2} s/step  {:>7.2} samples/s  (compute only, as PyTorch's); {:.1} GFLOP/s = {:.2} of the matmul peak",
             s.step_s,
-            batch as f64 / s.step_s.max(1e-9)
+            batch as f64 / s.step_s.max(1e-9),
+            flops.total() / s.step_s.max(1e-9) / 1e9,
+            share(s.step_s)
         );
         print_phases(&s.phases, s.step_s, s.optimizer_s, s.cpu_s, "the rest");
-        match torch_route(&args, &cfg, &work, threads, batch, k) {
+        match torch_route(args, &cfg, work, threads, batch, k) {
             Ok(v) => {
                 let torch_s = v["mean_step_s"].as_f64().unwrap_or(f64::NAN);
                 println!(
-                    "round {round}: pytorch {}    {torch_s:>7.2} s/step  {:>7.2} samples/s  (same weights, synthetic batch, {threads} threads, after {} warm-up steps); ratio {:.2}×",
+                    "round {round}: pytorch {}    {torch_s:>7.2} s/step  {:>7.2} samples/s  (same weights, synthetic batch, {threads} threads, after {} warm-up steps); {:.2} of the matmul peak; ratio {:.2}×",
                     v["torch"].as_str().unwrap_or("?"),
                     v["samples_per_s"].as_f64().unwrap_or(f64::NAN),
                     args.warmup,
+                    share(torch_s),
                     torch_s / s.step_s,
                 );
                 ratios.push((torch_s / s.step_s, torch_s));
@@ -132,12 +201,20 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
             }
         }
     }
+    shares.sort_by(f64::total_cmp);
+    if let Some(m) = shares.get(shares.len() / 2) {
+        println!(
+            "{}: the training step runs at {m:.2} of this machine's FP32 matmul peak (median of the rounds; goal ≥ 0.6)",
+            cfg.denoiser_name()
+        );
+    }
     if !ratios.is_empty() {
         ratios.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (median, torch_s) = ratios[ratios.len() / 2];
         let range = (ratios[0].0, ratios[ratios.len() - 1].0);
         println!(
-            "rust ÷ pytorch speed, both on a synthetic batch: {median:.2}× (median of {} alternating rounds, {:.2}–{:.2}; PyTorch's s/step over ours; goal ≥ 1.0)",
+            "{}: rust ÷ pytorch speed, both on a synthetic batch: {median:.2}× (median of {} alternating rounds, {:.2}–{:.2}; PyTorch's s/step over ours; goal ≥ 1.0)",
+            cfg.denoiser_name(),
             ratios.len(),
             range.0,
             range.1
@@ -147,24 +224,7 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
             torch_s / t.step_s
         );
     }
-
-    for size in [ModelSize::Ti, ModelSize::S] {
-        let mut c = ModelConfig::new(
-            size,
-            cfg.cameras.clone(),
-            (cfg.image_width, cfg.image_height),
-            cfg.state_dim,
-            cfg.action_dim,
-        );
-        c.obs_horizon = cfg.obs_horizon;
-        c.action_chunk = cfg.action_chunk;
-        let l = ddim_latency(&c, 10, args.latency_runs, &Device::Cpu)?;
-        println!(
-            "DDIM-10 {size:<3} per action chunk (batch 1, {} runs): p50 {:.1} ms (encoders {:.1} ms), p99 {:.1} ms (goal < 100 ms)",
-            l.runs, l.p50_ms, l.encode_p50_ms, l.p99_ms
-        );
-    }
-    Ok(Outcome::Completed)
+    Ok(cfg)
 }
 
 /// One line of where a step's time goes; `rest` names what the phases leave out.

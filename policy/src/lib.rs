@@ -81,6 +81,7 @@ mod checkpoint;
 mod config;
 mod engine;
 mod error;
+pub mod flops;
 mod image_chain;
 mod inference;
 pub mod model;

@@ -1,5 +1,6 @@
-"""PyTorch side of the training benchmark: the wheel's ScaleDP module (scaledp_data.policy, the
-one PyTorch definition), from the same initial weights, timed on the same number of threads.
+"""PyTorch side of the training benchmark: the wheel's module (scaledp_data.policy, the one
+PyTorch definition: ScaleDP or DP-T, as the config says), from the same initial weights, timed
+on the same number of threads.
 
     PYTHONPATH=<unpacked wheel> python bench_train_torch.py CONFIG.json WEIGHTS.safetensors \
         --batch 64 --steps 5 --warmup 3 --threads 2
@@ -24,7 +25,7 @@ try:
     import torch
     from safetensors.torch import load_file
 
-    from scaledp_data.policy import DenoisingLoss, Draws, NoiseScheduler, ScaleDPPolicy
+    from scaledp_data.policy import DenoisingLoss, Draws, NoiseScheduler, build_policy
     from scaledp_data.policy.options import default_options
     from scaledp_data.policy.trainer import param_groups
 except ImportError as e:
@@ -46,8 +47,9 @@ def main():
     torch.set_num_threads(args.threads)
     with open(args.config) as f:
         cfg = json.load(f)["model"]
-    policy = ScaleDPPolicy(cfg)
+    policy = build_policy(cfg)  # ScaleDP or DP-T (dropout on: a training step)
     policy.load_state_dict(load_file(args.weights), strict=True)
+    policy.train()
     o = default_options()
     opt = torch.optim.AdamW(param_groups(policy, o), lr=1e-4, betas=(0.9, 0.95), eps=1e-8)
     sched = NoiseScheduler(100)
