@@ -67,7 +67,16 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     );
     let mut cfg = None;
     for arch in archs {
-        cfg = Some(model_round(&args, &ds, &work, base.clone(), arch, size, threads, peak)?);
+        cfg = Some(model_round(
+            &args,
+            &ds,
+            &work,
+            base.clone(),
+            arch,
+            size,
+            threads,
+            peak,
+        )?);
     }
     let Some(cfg) = cfg else {
         bail!("--models: name at least one of ti, dp-t");
@@ -79,7 +88,13 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         cfg.action_dim,
     );
     let mut models = vec![
-        ModelConfig::new(ModelSize::Ti, inputs.0.clone(), inputs.1, inputs.2, inputs.3),
+        ModelConfig::new(
+            ModelSize::Ti,
+            inputs.0.clone(),
+            inputs.1,
+            inputs.2,
+            inputs.3,
+        ),
         ModelConfig::new(ModelSize::S, inputs.0.clone(), inputs.1, inputs.2, inputs.3),
         ModelConfig::dp_t(inputs.0, inputs.1, inputs.2, inputs.3),
     ];

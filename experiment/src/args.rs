@@ -14,6 +14,10 @@ pub enum ExperimentCommand {
     Compare(Box<CompareArgs>),
     /// Rebuilds the table and the plot of an experiment from its arms' result files.
     Report(ReportArgs),
+    /// Trains DP-T and ScaleDP at the same depths on the same data and seeds for a few hundred
+    /// steps and measures the spread of the blocks' gradient norms (the paper's explanation of
+    /// why DP-T does not scale with depth) into docs/results/grad-scale/.
+    GradScale(crate::GradScaleArgs),
 }
 
 /// A simulation benchmark `compare` can run end to end.

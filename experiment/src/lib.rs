@@ -17,6 +17,7 @@ mod args;
 mod arms;
 mod benchmark;
 mod evaluate;
+mod grad_scale;
 mod plot;
 mod results;
 mod train;
@@ -30,6 +31,7 @@ use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
 
 pub use args::{Benchmark, CompareArgs, ExperimentCommand, ReportArgs};
 pub use arms::{Arm, ARMS};
+pub use grad_scale::GradScaleArgs;
 pub use results::{ArmResult, EvalFigures};
 
 use evaluate::{EvalPlan, Kind};
@@ -40,6 +42,7 @@ use results::{Controls, Provenance, ValPoint};
 pub fn run(command: ExperimentCommand, stop: &Arc<AtomicBool>) -> Result<()> {
     match command {
         ExperimentCommand::Compare(a) => compare(&a, stop),
+        ExperimentCommand::GradScale(a) => grad_scale::run(&a, stop),
         ExperimentCommand::Report(a) => {
             let dir = a.results.join(&a.name);
             if benchmark::is_benchmark(&dir) {

@@ -31,9 +31,19 @@ impl StepFlops {
 }
 
 /// (FLOPs, output height, output width) of a convolution over `h × w`.
-fn conv(h: usize, w: usize, cin: usize, cout: usize, k: usize, stride: usize) -> (f64, usize, usize) {
+fn conv(
+    h: usize,
+    w: usize,
+    cin: usize,
+    cout: usize,
+    k: usize,
+    stride: usize,
+) -> (f64, usize, usize) {
     let pad = k / 2;
-    let (ho, wo) = ((h + 2 * pad - k) / stride + 1, (w + 2 * pad - k) / stride + 1);
+    let (ho, wo) = (
+        (h + 2 * pad - k) / stride + 1,
+        (w + 2 * pad - k) / stride + 1,
+    );
     (2.0 * (cin * cout * k * k * ho * wo) as f64, ho, wo)
 }
 
@@ -67,7 +77,11 @@ fn encoder_forward(cfg: &ModelConfig) -> (f64, f64) {
 
 /// Forward FLOPs of the denoiser for `n` observations with `k` noise draws each.
 fn denoiser_forward(cfg: &ModelConfig, n: usize, k: usize) -> f64 {
-    let (d, t, a) = (cfg.hidden as f64, cfg.action_chunk as f64, cfg.action_dim as f64);
+    let (d, t, a) = (
+        cfg.hidden as f64,
+        cfg.action_chunk as f64,
+        cfg.action_dim as f64,
+    );
     let (m, n) = ((n * k) as f64, n as f64);
     let layers = cfg.depth as f64;
     match cfg.arch {
@@ -83,10 +97,8 @@ fn denoiser_forward(cfg: &ModelConfig, n: usize, k: usize) -> f64 {
         Architecture::DpT => {
             let tc = (1 + cfg.obs_horizon) as f64;
             let self_attn = 2.0 * t * d * 3.0 * d + 2.0 * 2.0 * t * t * d + 2.0 * t * d * d;
-            let cross = 2.0 * t * d * d
-                + 2.0 * tc * d * 2.0 * d
-                + 2.0 * 2.0 * t * tc * d
-                + 2.0 * t * d * d;
+            let cross =
+                2.0 * t * d * d + 2.0 * tc * d * 2.0 * d + 2.0 * 2.0 * t * tc * d + 2.0 * t * d * d;
             let ffn = 2.0 * 2.0 * t * d * 4.0 * d;
             let memory = 2.0 * tc * 2.0 * d * 4.0 * d;
             let embed = 2.0 * t * a * d + 2.0 * t * d * a;
@@ -137,12 +149,19 @@ mod tests {
         let (enc, first) = encoder_forward(&cfg);
         // torchvision's ResNet-18 trunk (without avgpool/fc): 1.814 G multiply-adds.
         assert!((enc / 2.0 / 1e9 - 1.814).abs() < 0.02, "{}", enc / 2e9);
-        assert!((first / 2.0 / 1e6 - 118.0).abs() < 1.0, "conv1 {}", first / 2e6);
+        assert!(
+            (first / 2.0 / 1e6 - 118.0).abs() < 1.0,
+            "conv1 {}",
+            first / 2e6
+        );
         // One ScaleDP-Ti sample: 8 blocks of 12 d² per token over 16 tokens dominate.
         let d = 256.0;
         let per_sample = denoiser_forward(&cfg, 1, 1);
         let blocks = 8.0 * (2.0 * 16.0 * 12.0 * d * d);
-        assert!(per_sample > blocks && per_sample < 1.2 * blocks, "{per_sample}");
+        assert!(
+            per_sample > blocks && per_sample < 1.2 * blocks,
+            "{per_sample}"
+        );
         let s = step_flops(&cfg, 4, 2);
         assert!((s.encoders - 4.0 * 2.0 * (3.0 * enc - first)).abs() < 1.0);
         assert!(s.denoiser > 3.0 * 8.0 * blocks);

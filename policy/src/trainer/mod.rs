@@ -292,6 +292,16 @@ impl Trainer {
 
     /// One optimizer step on the next batch.
     pub fn step(&mut self) -> Result<StepRecord> {
+        self.step_inspect(&mut |_, _| {})
+    }
+
+    /// [`Trainer::step`], showing `inspect` every parameter's gradient (by name, before
+    /// clipping and the update): for measurements of the training itself, such as the spread
+    /// of gradient norms across blocks.
+    pub fn step_inspect(
+        &mut self,
+        inspect: &mut dyn FnMut(&str, &candle_core::Tensor),
+    ) -> Result<StepRecord> {
         let t0 = Instant::now();
         let batch = self.next_batch()?;
         let wait = t0.elapsed().as_secs_f64();
@@ -316,6 +326,11 @@ impl Trainer {
             &mut rng,
             &mut phases,
         )?;
+        for (p, g) in self.optim.params().iter().zip(&grads) {
+            if let Some(g) = g {
+                inspect(&p.name, g);
+            }
+        }
         let t_opt = Instant::now();
         if !loss.is_finite() {
             return Err(Error::Diverged {
