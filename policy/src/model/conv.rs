@@ -24,6 +24,7 @@
 use rayon::prelude::*;
 
 use crate::model::cpu::{gemm, product, side_by_side, sum_in_order, vectorized, with_scratch};
+pub(crate) use crate::model::geom::Geom;
 use crate::model::{taps, winograd};
 
 /// Largest patch matrix built at once (f32 values): 8 M = 32 MB.
@@ -40,65 +41,7 @@ const CACHED_PATCH_VALUES: usize = 1 << 18;
 mod op;
 pub use op::conv2d_nhwc;
 
-/// The geometry of one convolution.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Geom {
-    pub(crate) b: usize,
-    pub(crate) c_in: usize,
-    pub(crate) h: usize,
-    pub(crate) w: usize,
-    pub(crate) c_out: usize,
-    pub(crate) kh: usize,
-    pub(crate) kw: usize,
-    pub(crate) stride: usize,
-    pub(crate) padding: usize,
-}
-
 impl Geom {
-    /// From the NHWC input's and the OIHW kernel's dims.
-    pub(crate) fn new(
-        x: &[usize],
-        k: &[usize],
-        stride: usize,
-        padding: usize,
-    ) -> candle_core::Result<Self> {
-        let (&[b, h, w, c_in], &[c_out, kc, kh, kw]) = (x, k) else {
-            candle_core::bail!("conv2d: input {x:?} and kernel {k:?} must both be 4-D");
-        };
-        if kc != c_in {
-            candle_core::bail!("conv2d: input has {c_in} channels, kernel {kc}");
-        }
-        if h + 2 * padding < kh || w + 2 * padding < kw || stride == 0 {
-            candle_core::bail!("conv2d: kernel {kh}×{kw} larger than the padded input {h}×{w}");
-        }
-        Ok(Geom {
-            b,
-            c_in,
-            h,
-            w,
-            c_out,
-            kh,
-            kw,
-            stride,
-            padding,
-        })
-    }
-    pub(crate) fn out_h(&self) -> usize {
-        (self.h + 2 * self.padding - self.kh) / self.stride + 1
-    }
-    pub(crate) fn out_w(&self) -> usize {
-        (self.w + 2 * self.padding - self.kw) / self.stride + 1
-    }
-    pub(crate) fn pixels(&self) -> usize {
-        self.out_h() * self.out_w()
-    }
-    pub(crate) fn k(&self) -> usize {
-        self.c_in * self.kh * self.kw
-    }
-    /// Values of one input sample.
-    pub(crate) fn per_in(&self) -> usize {
-        self.h * self.w * self.c_in
-    }
     /// Samples per chunk so that a chunk's patch matrix stays under the limit.
     fn chunk(&self) -> usize {
         (MAX_PATCH_VALUES / (self.pixels() * self.k()).max(1)).clamp(1, self.b.max(1))

@@ -9,6 +9,7 @@ pub(crate) mod dpt;
 pub(crate) mod dropout;
 pub(crate) mod encoder;
 pub(crate) mod fused;
+pub(crate) mod geom;
 pub(crate) mod params;
 pub(crate) mod resnet;
 pub(crate) mod taps;

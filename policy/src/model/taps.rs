@@ -8,10 +8,10 @@
 //! added into the output (or scattered into the input gradient), about 1/C of its work.
 //! [`applies`] picks the maps where enough of the taps fall on the padding.
 
-use crate::model::conv::Geom;
 use crate::model::cpu::{
     side_by_side, strided_product, sum_in_order, vectorized, with_scratch, Strided,
 };
+use crate::model::geom::Geom;
 
 /// Whether `g` goes tap by tap: a kernel larger than 1×1 on a small map (64 output pixels or
 /// fewer) with at least 35 % of its taps on the padding. Measured layer by layer (`conv_ops`

@@ -19,10 +19,10 @@
 
 use rayon::prelude::*;
 
-use crate::model::conv::Geom;
 use crate::model::cpu::{
     side_by_side, strided_product, sum_in_order, vectorized, with_scratch, Strided,
 };
+use crate::model::geom::Geom;
 
 /// Largest transformed chunk (input and output tiles together, f32 values) per thread.
 const MAX_CHUNK_VALUES: usize = 4 << 20;
