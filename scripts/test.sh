@@ -33,6 +33,11 @@ step "python peers (.venv)"
 bash scripts/setup-bench-python.sh
 step "lerobot (.venv-bench)"
 
+# MetaWorld 3.1 and gym-aloha on MuJoCo 3.3 (.venv-sims): the simulation benchmarks' bridges,
+# their kinematics tests and the MetaWorld end-to-end test.
+bash scripts/setup-sims.sh
+step "simulators (.venv-sims)"
+
 cargo fmt --all -- --check
 step "cargo fmt --check"
 
