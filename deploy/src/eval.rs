@@ -161,6 +161,10 @@ pub struct EvalReport {
     /// A bridge rig's simulator: its packages' versions (`metaworld`, `mujoco`, …).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulator: Option<std::collections::BTreeMap<String, String>>,
+    /// Live on a bridge rig: the median over episodes of the simulation's speed against the
+    /// wall clock (1: real time).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub real_time_factor: Option<f64>,
 }
 
 impl EpisodeReport {
@@ -317,6 +321,7 @@ pub(crate) fn summarize(
         e2e_ms_p50: None,
         wall_s: 0.0,
         simulator: None,
+        real_time_factor: None,
         episodes,
     }
 }

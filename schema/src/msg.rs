@@ -60,6 +60,11 @@ const DEFS: &[(&str, &str, &[&str])] = &[
         "builtin_interfaces/Time timestamp\nstring frame_id\nuint8[] data\nstring format\n",
         &["builtin_interfaces/Time"],
     ),
+    (
+        "rosgraph_msgs/Clock",
+        "builtin_interfaces/Time clock\n",
+        &["builtin_interfaces/Time"],
+    ),
     ("geometry_msgs/Point", "float64 x\nfloat64 y\nfloat64 z\n", &[]),
     ("geometry_msgs/Quaternion", "float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n", &[]),
     (
@@ -454,6 +459,26 @@ impl RosMessage for PoseStamped {
         Ok(Self {
             header: Header::read(r)?,
             pose: Pose::read(r)?,
+        })
+    }
+}
+
+/// `rosgraph_msgs/msg/Clock`: a simulation's time on `/clock`, which nodes follow instead of the
+/// wall clock under ROS's `use_sim_time`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Clock {
+    /// The simulation's time now.
+    pub clock: Time,
+}
+
+impl RosMessage for Clock {
+    const TYPE_NAME: &'static str = "rosgraph_msgs/msg/Clock";
+    fn write(&self, w: &mut CdrWriter) {
+        self.clock.write(w);
+    }
+    fn read(r: &mut CdrReader<'_>) -> Result<Self> {
+        Ok(Self {
+            clock: Time::read(r)?,
         })
     }
 }

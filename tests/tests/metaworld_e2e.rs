@@ -62,7 +62,10 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
         "--results",
         "results",
     ];
-    let first = ok(&scaledp(&args, root), "experiment compare --benchmark metaworld");
+    let first = ok(
+        &scaledp(&args, root),
+        "experiment compare --benchmark metaworld",
+    );
     let res = root.join("results/metaworld");
     for arm in ["ti", "dp-t"] {
         let r = read_json(&res.join(format!("reach--{arm}.json")));
@@ -80,7 +83,10 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
         assert!(r["train_revision"].is_string(), "{r}");
         let lo = r["wilson_low"].as_f64().unwrap();
         let hi = r["wilson_high"].as_f64().unwrap();
-        assert!(lo <= r["test_success_rate"].as_f64().unwrap() && hi <= 1.0, "{r}");
+        assert!(
+            lo <= r["test_success_rate"].as_f64().unwrap() && hi <= 1.0,
+            "{r}"
+        );
     }
     let c = read_json(&res.join("reach--controls.json"));
     let expert = &c["controls"]["scripted_expert"];
@@ -94,10 +100,46 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
     );
     assert!(res.join("success_by_level.svg").exists());
     // The demonstrations went through the recorder, labelled by MetaWorld's success.
-    let manifest = std::fs::read_to_string(root.join("runs/metaworld/reach/demos/collect.jsonl"))
-        .unwrap();
-    assert!(manifest.lines().filter(|l| l.contains("\"success\"")).count() >= 2);
+    let manifest =
+        std::fs::read_to_string(root.join("runs/metaworld/reach/demos/collect.jsonl")).unwrap();
+    assert!(
+        manifest
+            .lines()
+            .filter(|l| l.contains("\"success\""))
+            .count()
+            >= 2
+    );
+    // The same checkpoint live: the simulator on its own /clock, serve following it.
+    let report = root.join("live.json");
+    let live = ok(
+        &scaledp(
+            &[
+                "eval",
+                "runs/metaworld/reach/ti",
+                "--live",
+                "--episodes",
+                "1",
+                "--split",
+                "val",
+                "--max-seconds",
+                "0.5",
+                "--report",
+                report.to_str().unwrap(),
+            ],
+            root,
+        ),
+        "eval --live",
+    );
+    let r = read_json(&report);
+    assert_eq!(r["mode"], "live", "{live}\n{r}");
+    let ep = &r["episodes"][0];
+    assert!(ep["duration_s"].as_f64().unwrap() >= 0.5, "{r}");
+    assert!(ep["commanded_ticks"].as_u64().unwrap() >= 5, "{r}");
+    assert!(r["real_time_factor"].as_f64().unwrap() > 0.05, "{r}");
     // A second run finds every result there and redoes nothing.
     let again = ok(&scaledp(&args, root), "compare again");
-    assert!(!again.contains("test "), "nothing re-scored: {again}\n(first: {first})");
+    assert!(
+        !again.contains("test "),
+        "nothing re-scored: {again}\n(first: {first})"
+    );
 }

@@ -11,10 +11,12 @@
 //! images (tightly packed RGB, in the rig's camera order) and the task's success.
 //!
 //! [`episodes`] publishes it on Zenoh as zenoh-bridge-ros2dds would (the expert's episodes
-//! through the recorder: `scaledp collect`); `deploy` evaluates policies on it in simulated
-//! time.
+//! through the recorder: `scaledp collect`); [`live`] runs it on Zenoh in a loop of its own with
+//! the simulation's `/clock` (`scaledp sim`, `eval --live`); `deploy` evaluates policies on it in
+//! simulated time.
 
 pub mod episodes;
+pub mod live;
 mod process;
 
 use std::collections::BTreeMap;

@@ -204,6 +204,7 @@ fn with_progress(
         ok += u64::from(e.success);
         let outcome = match e.time_to_success_s {
             Some(t) if e.success => format!("success at {t:.1} s"),
+            _ if e.cube_distance_m.is_empty() => "failure".to_string(),
             _ => format!(
                 "failure (cube {} m from its target)",
                 e.cube_distance_m
@@ -235,9 +236,10 @@ fn finish(
     seed: u64,
     dir: &std::path::Path,
 ) -> Result<()> {
-    let suffix = match (a.expert, a.freeze_cameras) {
-        (true, _) => "-expert",
-        (_, true) => "-frozen",
+    let suffix = match (a.expert, a.freeze_cameras, a.live) {
+        (true, _, _) => "-expert",
+        (_, true, _) => "-frozen",
+        (_, _, true) => "-live",
         _ => "",
     };
     let path = a.report.clone().unwrap_or_else(|| {

@@ -44,6 +44,16 @@ pub fn run(args: SimArgs) -> Result<ExitStatus> {
         KeysArg::Rmw => KeyStyle::Rmw,
     };
     tracing::info!(rig = %rig.name, seed = args.seed, "simulating {} topics", rig.topics().len());
+    if rig.simulator.is_some() {
+        anyhow::ensure!(
+            args.episodes.is_none(),
+            "--episodes records a recorder's episodes around the built-in cell; for {} use `scaledp collect --rig {}`",
+            rig.name,
+            rig.name
+        );
+        let stop = shared::interrupt_flag();
+        return bridge(rig, &args, keys, scripted, &session, &stop);
+    }
     let sim = SimOptions::new(rig)
         .seed(args.seed)
         .keys(keys)
@@ -160,5 +170,77 @@ fn episodes(
         tally.rate() * 100.0,
         started.elapsed().as_secs_f64() / tally.episodes.max(1) as f64
     );
+    Ok(ExitStatus::Success)
+}
+
+/// A bridge rig (`metaworld/<task>`) live: its simulator stepping on its own `/clock`, taking
+/// commands (or, with the scripted operator, its expert demonstrating seed after seed, each
+/// ended a fifth of a second after its success or at the simulator's last step).
+fn bridge(
+    rig: Rig,
+    args: &SimArgs,
+    keys: KeyStyle,
+    expert: bool,
+    session: &zenoh::Session,
+    stop: &AtomicBool,
+) -> Result<ExitStatus> {
+    use scaledp_sim::bridge::live::{LiveBridge, LiveOptions};
+    let mut o = LiveOptions::new(rig.clone());
+    o.keys = keys;
+    o.namespace = args.namespace.clone();
+    o.control_prefix = args.sim_prefix.clone();
+    o.seed = args.seed;
+    o.expert = expert;
+    let sim = LiveBridge::spawn(o, session)?;
+    eprintln!(
+        "{} live on the simulation's /clock{} (Ctrl-C stops)",
+        rig.name,
+        if expert {
+            ", its scripted expert demonstrating"
+        } else {
+            ", following the command topics"
+        }
+    );
+    let start = Instant::now();
+    let (mut seed, mut last_line) = (args.seed, Instant::now());
+    while !stop.load(Ordering::Relaxed)
+        && args
+            .duration
+            .is_none_or(|d| start.elapsed().as_secs_f64() < d)
+    {
+        std::thread::sleep(Duration::from_millis(50));
+        let t = sim.task();
+        let over = t.done || t.time_to_success_s.is_some_and(|s| t.t_s - s >= 0.2);
+        if expert && over && t.seed == seed {
+            println!(
+                "seed {seed}\t{}\t{:.2} s simulated, {:.2}× real time",
+                if t.time_to_success_s.is_some() {
+                    "success"
+                } else {
+                    "failure"
+                },
+                t.t_s,
+                t.real_time_factor
+            );
+            seed += 1;
+            sim.reset(seed);
+        }
+        if !expert && last_line.elapsed() >= Duration::from_secs(5) {
+            last_line = Instant::now();
+            eprintln!(
+                "seed {} step {} ({:.2} s simulated, {:.2}× real time){}",
+                t.seed,
+                t.step,
+                t.t_s,
+                t.real_time_factor,
+                if t.time_to_success_s.is_some() {
+                    ", success"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
+    sim.stop()?;
     Ok(ExitStatus::Success)
 }

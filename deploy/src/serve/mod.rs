@@ -13,26 +13,26 @@
 //!
 //! A JSON [`Status`] goes out once a second on the status key (default `scaledp/serve/status`).
 
-use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use scaledp_policy::{ActionChunk, Policy};
-use scaledp_recorder::keys::{bridge_key, rmw_key, rmw_key_expr, RmwAttachment};
-use scaledp_recorder::now_ns;
-use scaledp_schema::msg::{CompressedImage, Image, JointState};
+use scaledp_recorder::keys::{bridge_key, rmw_key, rmw_key_expr};
+use scaledp_schema::msg::{Clock, CompressedImage, Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
-use scaledp_sim::{messages, KeyStyle};
+use scaledp_sim::KeyStyle;
 use serde::Serialize;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use crate::controller::{Command, ControlOptions, Controller, Request};
 use crate::error::{Error, Result};
-use crate::stats::percentile;
+
+mod control;
+
+use control::{control_loop, Clocks, Outputs};
 
 /// Called with the tick index and the commands of every tick that has some.
 pub type CommandHook = Arc<dyn Fn(u64, &[Command]) + Send + Sync>;
@@ -56,6 +56,10 @@ pub struct ServeOptions {
     pub seed: u64,
     /// Sees every tick's commands.
     pub on_commands: Option<CommandHook>,
+    /// Follow a simulation's `rosgraph_msgs/msg/Clock` topic (ROS's `use_sim_time`, e.g.
+    /// `/clock`) instead of the wall clock: ticks, receive times and command stamps are its
+    /// time, so a simulator slower than real time is served as a robot would be.
+    pub clock: Option<String>,
 }
 
 impl ServeOptions {
@@ -70,6 +74,7 @@ impl ServeOptions {
             status_key: "scaledp/serve/status".into(),
             seed: 0,
             on_commands: None,
+            clock: None,
         }
     }
 }
@@ -127,6 +132,8 @@ impl Status {
 enum Input {
     Image(usize, u64, u64, Vec<u8>),
     Joints(usize, bool, u64, JointState),
+    /// A simulation's `/clock` (ns).
+    Clock(u64),
 }
 
 /// A running node.
@@ -139,17 +146,6 @@ pub struct Server {
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
-struct Outputs {
-    /// Per arm: pose publisher and key type, gripper publisher.
-    arms: Vec<(
-        Option<zenoh::pubsub::Publisher<'static>>,
-        Option<zenoh::pubsub::Publisher<'static>>,
-    )>,
-    rmw: bool,
-    seq: i64,
-    status: zenoh::pubsub::Publisher<'static>,
 }
 
 impl Server {
@@ -169,6 +165,31 @@ impl Server {
         };
         let (tx, rx) = crossbeam_channel::unbounded::<Input>();
         let mut subscribers = Vec::new();
+        let clocks = Clocks {
+            sim: opts
+                .clock
+                .as_ref()
+                .map(|_| Arc::new(std::sync::atomic::AtomicU64::new(0))),
+        };
+        if let (Some(topic), Some(now)) = (&opts.clock, &clocks.sim) {
+            let (k, tx, now) = (
+                sub_key(topic, "rosgraph_msgs/msg/Clock"),
+                tx.clone(),
+                now.clone(),
+            );
+            let sub = session
+                .declare_subscriber(k.clone())
+                .callback(move |s: Sample| {
+                    if let Ok(c) = Clock::from_cdr(&s.payload().to_bytes()) {
+                        let ns = c.clock.as_ns();
+                        now.store(ns, Ordering::Relaxed);
+                        let _ = tx.send(Input::Clock(ns));
+                    }
+                })
+                .wait()
+                .map_err(|e| Error::zenoh(&k, e))?;
+            subscribers.push(sub);
+        }
         for &c in ctl.cameras() {
             let cam = &rig.cameras[c];
             let (k, ty, tx) = (
@@ -177,6 +198,7 @@ impl Server {
                 tx.clone(),
             );
             let compressed = ty.ends_with("CompressedImage");
+            let clk = clocks.clone();
             let sub = session
                 .declare_subscriber(k.clone())
                 .callback(move |s: Sample| {
@@ -187,7 +209,7 @@ impl Server {
                         Image::from_cdr(&data).map(|m| m.header.stamp.as_ns())
                     };
                     if let Ok(stamp) = stamp {
-                        let _ = tx.send(Input::Image(c, stamp, now_ns(), data));
+                        let _ = tx.send(Input::Image(c, stamp, clk.now_ns(), data));
                     }
                 })
                 .wait()
@@ -201,11 +223,12 @@ impl Server {
             }
             for (topic, gripper) in topics {
                 let (k, tx) = (sub_key(&topic, "sensor_msgs/msg/JointState"), tx.clone());
+                let clk = clocks.clone();
                 let sub = session
                     .declare_subscriber(k.clone())
                     .callback(move |s: Sample| {
                         if let Ok(js) = JointState::from_cdr(&s.payload().to_bytes()) {
-                            let _ = tx.send(Input::Joints(a, gripper, now_ns(), js));
+                            let _ = tx.send(Input::Joints(a, gripper, clk.now_ns(), js));
                         }
                     })
                     .wait()
@@ -282,7 +305,9 @@ impl Server {
         let hook = opts.on_commands.clone();
         let control = spawn(
             "serve:control",
-            Box::new(move || control_loop(ctl, rx, req_tx, res_rx, outputs, hook, &st, &sp)),
+            Box::new(move || {
+                control_loop(ctl, rx, req_tx, res_rx, outputs, hook, clocks, &st, &sp)
+            }),
         )?;
         Ok(Server {
             stop,
@@ -310,157 +335,5 @@ impl Server {
 impl Drop for Server {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
-    }
-}
-
-#[allow(clippy::too_many_arguments)]
-fn control_loop(
-    mut ctl: Controller,
-    rx: Receiver<Input>,
-    req_tx: Sender<Request>,
-    res_rx: Receiver<(u64, ActionChunk, f64)>,
-    mut out: Outputs,
-    hook: Option<CommandHook>,
-    status: &Mutex<Status>,
-    stop: &AtomicBool,
-) {
-    let period = Duration::from_nanos(ctl.period_ns());
-    let mut next = Instant::now() + period;
-    let mut latencies: VecDeque<f64> = VecDeque::new();
-    let mut commanded: VecDeque<Instant> = VecDeque::new();
-    // Receive time of the newest frame behind each request, and of the chunk just installed.
-    let mut frame_of_request: VecDeque<(u64, u64)> = VecDeque::new();
-    let mut fresh_chunk: Option<u64> = None;
-    let mut e2e: VecDeque<f64> = VecDeque::new();
-    let started = Instant::now();
-    let mut last_status = Instant::now();
-    let mut st = Status {
-        dry_run: lock(status).dry_run,
-        ..Status::default()
-    };
-    while !stop.load(Ordering::Relaxed) {
-        match rx.recv_timeout(next.saturating_duration_since(Instant::now())) {
-            Ok(Input::Image(c, stamp, recv, data)) => {
-                let ty = ctl.rig().cameras[c].message_type();
-                ctl.on_image(c, stamp, recv, ty, data);
-                continue;
-            }
-            Ok(Input::Joints(a, g, recv, js)) => {
-                ctl.on_joint_state(a, g, recv, &js);
-                continue;
-            }
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => break,
-        }
-        let now = Instant::now();
-        next += period;
-        if next < now {
-            next = now + period; // fell behind: skip ticks rather than bunch them
-        }
-        for (index, chunk, ms) in res_rx.try_iter() {
-            ctl.install(index, &chunk);
-            while let Some(&(i, frame_ns)) = frame_of_request.front() {
-                frame_of_request.pop_front();
-                if i == index {
-                    fresh_chunk = Some(frame_ns);
-                    break;
-                }
-            }
-            st.chunks += 1;
-            latencies.push_back(ms);
-            if latencies.len() > 200 {
-                latencies.pop_front();
-            }
-            let v: Vec<f64> = latencies.iter().copied().collect();
-            st.inference_ms_p50 = percentile(&v, 0.5);
-            st.inference_ms_p99 = percentile(&v, 0.99);
-            let p50_ns = st.inference_ms_p50.unwrap_or(0.0) * 1e6;
-            ctl.set_lead_ticks((p50_ns / ctl.period_ns() as f64).ceil() as u64);
-        }
-        let tick = ctl.tick(now_ns());
-        st.ticks += 1;
-        st.halted_ticks += u64::from(tick.halted.is_some());
-        if let Some(req) = tick.request {
-            if let Some(f) = ctl.newest_frame_ns() {
-                frame_of_request.push_back((req.index, f));
-            }
-            let _ = req_tx.send(req);
-        }
-        match ctl.command() {
-            Ok(cmds) => {
-                st.holding = None;
-                st.commanded_ticks += 1;
-                st.clamped_ticks += u64::from(cmds.iter().any(|c| c.clamped.any()));
-                commanded.push_back(now);
-                publish(&ctl, &mut out, &cmds);
-                if let Some(f) = fresh_chunk.take() {
-                    e2e.push_back(now_ns().saturating_sub(f) as f64 * 1e-6);
-                    if e2e.len() > 200 {
-                        e2e.pop_front();
-                    }
-                    let v: Vec<f64> = e2e.iter().copied().collect();
-                    st.e2e_ms_p50 = percentile(&v, 0.5);
-                    st.e2e_ms_p99 = percentile(&v, 0.99);
-                }
-                if let Some(h) = &hook {
-                    h(tick.index, &cmds);
-                }
-            }
-            Err(why) => st.holding = Some(why),
-        }
-        while commanded
-            .front()
-            .is_some_and(|t| now.duration_since(*t) > Duration::from_secs(2))
-        {
-            commanded.pop_front();
-        }
-        let window = started.elapsed().as_secs_f64().clamp(1e-3, 2.0);
-        st.command_rate_hz = commanded.len() as f64 / window;
-        *lock(status) = st.clone();
-        if last_status.elapsed() >= Duration::from_secs(1) {
-            last_status = Instant::now();
-            if let Ok(json) = serde_json::to_string(&st) {
-                let _ = out.status.put(json).wait();
-            }
-        }
-    }
-}
-
-fn publish(ctl: &Controller, out: &mut Outputs, cmds: &[Command]) {
-    let stamp = now_ns();
-    for c in cmds {
-        let arm = &ctl.rig().arms[c.arm];
-        let Some((pose_pub, grip_pub)) = out.arms.get(c.arm) else {
-            continue;
-        };
-        let mut put = |p: &zenoh::pubsub::Publisher<'static>, bytes: Vec<u8>| {
-            out.seq += 1;
-            let put = p.put(bytes);
-            let r = if out.rmw {
-                put.attachment(
-                    RmwAttachment {
-                        sequence_number: out.seq,
-                        source_timestamp_ns: stamp as i64,
-                        source_gid: vec![0x5e; 16],
-                    }
-                    .to_zbytes(),
-                )
-                .wait()
-            } else {
-                put.wait()
-            };
-            if let Err(e) = r {
-                tracing::warn!("{}: {e}", p.key_expr());
-            }
-        };
-        if let Some(p) = pose_pub {
-            put(
-                p,
-                messages::pose_command(arm, &c.base_from_tcp, stamp).to_cdr(),
-            );
-        }
-        if let (Some(p), Some(g), Some(w)) = (grip_pub, &arm.gripper, c.gripper_width_m) {
-            put(p, messages::gripper_command(g, w, stamp).to_cdr());
-        }
     }
 }
