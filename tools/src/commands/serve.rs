@@ -40,6 +40,11 @@ pub struct ServeArgs {
     /// Seed of the sampling noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Follow a simulation's rosgraph_msgs/Clock topic instead of the wall clock (ROS's
+    /// use_sim_time): ticks, receive times and command stamps on its time. `scaledp sim --rig
+    /// metaworld/<task>` publishes /clock.
+    #[arg(long, value_name = "TOPIC")]
+    pub clock: Option<String>,
     #[command(flatten)]
     pub control: ControlArgs,
     /// Network settings; by default it connects to tcp/127.0.0.1:7447 (the bridge, or `scaledp sim`).
@@ -80,6 +85,7 @@ pub fn run(a: ServeArgs) -> Result<ExitStatus> {
     opts.dry_run = a.dry_run;
     opts.status_key = a.status_key.clone();
     opts.seed = a.seed;
+    opts.clock = a.clock.clone();
     if a.dry_run {
         let r = rig.clone();
         opts.on_commands = Some(Arc::new(move |tick, cmds| {
