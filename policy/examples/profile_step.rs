@@ -1,7 +1,7 @@
 //! Where a training step's time goes, on a synthetic batch (no loader):
 //!
 //! ```sh
-//! cargo run --release -p scaledp-policy --example profile_step -- [WxH] [cams] [batch] [steps] [micro] [noise_samples] [resnet_width] [engine|autograd]
+//! cargo run --release -p scaledp-policy --example profile_step -- [WxH] [cams] [batch] [steps] [micro] [noise_samples] [resnet_width] [engine|autograd] [ti|dp-t]
 //! ```
 use scaledp_policy::bench::synthetic_step_profile;
 use scaledp_policy::{LossSpec, ModelConfig, ModelSize};
@@ -25,7 +25,11 @@ fn main() -> scaledp_policy::Result<()> {
     let names = (0..cams)
         .map(|i| format!("observation.images.cam{i}"))
         .collect();
-    let mut cfg = ModelConfig::new(ModelSize::Ti, names, (w, h), 7, 7);
+    let mut cfg = if args.get(9).is_some_and(|s| s == "dp-t") {
+        ModelConfig::dp_t(names, (w, h), 7, 7)
+    } else {
+        ModelConfig::new(ModelSize::Ti, names, (w, h), 7, 7)
+    };
     cfg.resnet_width = width;
     let spec = LossSpec {
         noise_samples: k,

@@ -59,6 +59,30 @@ pub(crate) fn affine_backward(
     }
 }
 
+/// eˣ in float32, branch-free so a loop of it vectorizes (libm's `expf`, one value at a time,
+/// made the FFN's GELU and its gradient a fifth of a DP-T step): Cephes' `expf` — x = n·ln 2 +
+/// r with |r| ≤ ln 2 / 2, a degree-6 polynomial for eʳ, and 2ⁿ put into the exponent bits.
+/// Within 2.5e-7 of `f32::exp` relatively (the test); e⁻⁸⁷·³ below −87.3, e⁸⁸·⁷ above 88.7.
+#[inline]
+pub(crate) fn exp(x: f32) -> f32 {
+    const LOG2E: f32 = std::f32::consts::LOG2_E;
+    const C1: f32 = 0.693_359_4;
+    const C2: f32 = -2.121_944_4e-4;
+    let x = x.clamp(-87.3, 88.7);
+    let n = (x * LOG2E + 0.5).floor();
+    let r = x - n * C1 - n * C2;
+    let z = r * r;
+    let p = (((((1.987_569_2e-4 * r + 1.398_199_9e-3) * r + 8.333_452e-3) * r + 4.166_579_6e-2)
+        * r
+        + 0.166_666_65)
+        * r
+        + 0.5)
+        * z
+        + r
+        + 1.0;
+    p * f32::from_bits(((n as i32 + 127) as u32) << 23)
+}
+
 /// erf by Abramowitz & Stegun 7.1.26 (|error| ≤ 1.5·10⁻⁷, PyTorch's vectorized CPU erf):
 /// branch-free, so a loop of it vectorizes.
 #[inline]
@@ -74,7 +98,7 @@ pub(crate) fn erf(x: f32) -> f32 {
     let ax = x.abs();
     let t = 1.0 / (1.0 + P * ax);
     let poly = ((((A[4] * t + A[3]) * t + A[2]) * t + A[1]) * t + A[0]) * t;
-    let y = 1.0 - poly * (-ax * ax).exp();
+    let y = 1.0 - poly * exp(-ax * ax);
     y.copysign(x)
 }
 
@@ -91,7 +115,7 @@ pub(crate) fn gelu_erf(x: f32) -> f32 {
 /// d GELU / dx = Φ(x) + x · φ(x).
 #[inline]
 pub(crate) fn gelu_erf_grad(x: f32) -> f32 {
-    0.5 * (1.0 + erf(x * FRAC_1_SQRT_2)) + x * INV_SQRT_2PI * (-0.5 * x * x).exp()
+    0.5 * (1.0 + erf(x * FRAC_1_SQRT_2)) + x * INV_SQRT_2PI * exp(-0.5 * x * x)
 }
 
 /// softplus, `ln(1 + eˣ)`, without overflow.
@@ -191,6 +215,16 @@ mod tests {
             assert!((fd(mish) - mish_grad(xf)).abs() < 2e-3, "mish'({x})");
         }
         assert_eq!(mish(100.0), 100.0);
+        // The vectorizable exp against libm's over the range that matters and past its ends.
+        let mut worst = 0f32;
+        for i in -87_000..=88_000 {
+            let x = i as f32 / 1000.0;
+            let (a, b) = (exp(x), x.exp());
+            worst = worst.max(((a - b) / b).abs());
+        }
+        assert!(worst < 2.5e-7, "exp: relative error {worst}");
+        assert!(exp(-200.0) < 2e-38, "the smallest normal or less");
+        assert!(exp(200.0) > 1e38);
         assert!(mish(-100.0).abs() < 1e-30);
     }
 }
