@@ -146,12 +146,34 @@ pub fn metaworld_difficulty(name: &str) -> Option<Difficulty> {
     metaworld_tasks().find(|(n, _)| *n == name).map(|(_, d)| d)
 }
 
+/// gym-aloha's bimanual tasks, as `aloha/<task>` rigs name them.
+pub const ALOHA_TASKS: [&str; 2] = ["transfer-cube", "insertion"];
+
+const ALOHA_TEMPLATE: &str = include_str!("../../rigs/aloha.toml");
+
+fn aloha_rig(task: &str) -> Result<Rig> {
+    if !ALOHA_TASKS.contains(&task) {
+        return Err(Error::Rig {
+            path: PathBuf::from(format!("aloha/{task}")),
+            reason: format!(
+                "gym-aloha has no task {task:?}; its tasks: {}",
+                ALOHA_TASKS.join(", ")
+            ),
+        });
+    }
+    let text = ALOHA_TEMPLATE.replace("TASK", task);
+    Rig::parse(&text, &PathBuf::from("rigs/aloha.toml"))
+}
+
 const METAWORLD_TEMPLATE: &str = include_str!("../../rigs/metaworld.toml");
 
 /// The built-in rig of a simulated benchmark: `metaworld/<task>` for any of MetaWorld's 50
-/// tasks. `None` when `name` names no benchmark; an error naming the valid tasks when it names
+/// tasks, `aloha/<task>` for gym-aloha's two ([`ALOHA_TASKS`]). `None` when `name` names no benchmark; an error naming the valid tasks when it names
 /// a benchmark but no task of it.
 pub fn builtin(name: &str) -> Option<Result<Rig>> {
+    if let Some(task) = name.strip_prefix("aloha/") {
+        return Some(aloha_rig(task));
+    }
     let task = name.strip_prefix("metaworld/")?;
     let task = task.strip_suffix("-v3").unwrap_or(task);
     if metaworld_difficulty(task).is_none() {
@@ -202,5 +224,12 @@ mod tests {
         );
         assert!(builtin("franka_sim").is_none());
         assert_eq!(metaworld_difficulty("assembly-v3"), Some(Difficulty::Hard));
+        for task in ALOHA_TASKS {
+            let rig = builtin(&format!("aloha/{task}")).unwrap().unwrap();
+            assert_eq!(rig.arms.len(), 2);
+            assert_eq!(rig.simulator.as_ref().unwrap().bridge, SimulatorKind::Aloha);
+        }
+        let e = builtin("aloha/juggle").unwrap().unwrap_err().to_string();
+        assert!(e.contains("transfer-cube, insertion"), "{e}");
     }
 }

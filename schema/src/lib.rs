@@ -5,6 +5,7 @@
 //! No I/O framework, no networking: everything else in the workspace depends on this crate,
 //! and it depends on nothing heavy.
 
+pub mod action;
 pub mod benchmarks;
 mod cdr;
 mod chains;
@@ -14,6 +15,7 @@ pub mod kinematics;
 pub mod msg;
 pub mod rig;
 
+pub use action::ActionSpace;
 pub use cdr::{CdrReader, CdrWriter, CDR_BE_HEADER, CDR_LE_HEADER};
 pub use episode::{EpisodeMetadata, Label};
 pub use error::{Error, Result};

@@ -112,6 +112,10 @@ pub enum GripperModel {
     /// MetaWorld's Sawyer gripper: prismatic `r_close` (0 open … 0.04) and `l_close` (−0.03 …
     /// 0 open); the pads are 0.094 − r + l apart.
     MetaworldSawyer,
+    /// gym-aloha's ViperX gripper: prismatic `left_finger` (0.021 … 0.057 m) and
+    /// `right_finger` (its mirror, negative); the fingers are left − right apart, 0.116 m when
+    /// commanded fully open (each finger at 0.058 m).
+    AlohaViperx,
 }
 
 impl GripperModel {
@@ -124,6 +128,11 @@ impl GripperModel {
                 let r = positions.first().copied().unwrap_or(0.0);
                 let l = positions.get(1).copied().unwrap_or(0.0);
                 0.094 - r + l
+            }
+            Self::AlohaViperx => {
+                let l = positions.first().copied().unwrap_or(0.0);
+                let r = positions.get(1).copied().unwrap_or(0.0);
+                l - r
             }
         }
     }
@@ -138,6 +147,11 @@ impl GripperModel {
                 q.resize(joints, 0.0);
                 q
             }
+            Self::AlohaViperx => {
+                let mut q = vec![width_m / 2.0, -width_m / 2.0];
+                q.resize(joints, 0.0);
+                q
+            }
         }
     }
     /// Widest opening (m).
@@ -146,6 +160,7 @@ impl GripperModel {
             Self::FrankaHand => 0.08,
             Self::Robotiq2f85 => 0.085,
             Self::MetaworldSawyer => 0.094,
+            Self::AlohaViperx => 0.116,
         }
     }
 }
@@ -297,7 +312,7 @@ impl Rig {
 
     /// The rigs shipped in `rigs/`, by name: `franka_2zed`, `bimanual_ur5_3rs`, and their
     /// simulated task cells with command topics and smaller images, `franka_sim` and
-    /// `bimanual_ur5_sim`; and the simulation benchmarks' `metaworld/<task>`.
+    /// `bimanual_ur5_sim`; and the simulation benchmarks' `metaworld/<task>` and `aloha/<task>`.
     pub fn builtin(name: &str) -> Option<Self> {
         if let Some(rig) = crate::benchmarks::builtin(name) {
             return rig.ok();
@@ -588,6 +603,7 @@ mod tests {
             GripperModel::FrankaHand,
             GripperModel::Robotiq2f85,
             GripperModel::MetaworldSawyer,
+            GripperModel::AlohaViperx,
         ] {
             let q = m.positions_for_width(0.05, 2);
             assert!(
@@ -599,5 +615,8 @@ mod tests {
         let mw = GripperModel::MetaworldSawyer;
         assert!((mw.width_m(&[0.0, 0.0]) - 0.094).abs() < 1e-12);
         assert!((mw.width_m(&[0.04, -0.03]) - 0.024).abs() < 1e-12);
+        // ALOHA: fingers at gym-aloha's open position (0.058 m each) are 0.116 m apart.
+        let aloha = GripperModel::AlohaViperx;
+        assert!((aloha.width_m(&[0.058, -0.058]) - aloha.max_width_m()).abs() < 1e-12);
     }
 }

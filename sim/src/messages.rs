@@ -169,18 +169,22 @@ pub fn read_gripper_command(g: &Gripper, js: &JointState) -> Option<f64> {
 
 /// `base_from_tcp` of a leader arm's joints (mapped by name) through the follower's kinematics.
 pub fn read_joint_command(arm: &Arm, flange_from_tcp: &DMat4, js: &JointState) -> Option<DMat4> {
-    let q: Option<Vec<f64>> = arm
-        .joint_names
+    arm.model
+        .base_from_flange(&read_joints(arm, js)?)
+        .ok()
+        .map(|f| f * *flange_from_tcp)
+}
+
+/// The arm's joint positions in a `JointState` (mapped by name, rig order; `None` when one is
+/// missing or a value is not finite).
+pub fn read_joints(arm: &Arm, js: &JointState) -> Option<Vec<f64>> {
+    arm.joint_names
         .iter()
         .map(|n| {
             let i = js.name.iter().position(|x| x == n)?;
-            js.position.get(i).copied()
+            js.position.get(i).copied().filter(|v| v.is_finite())
         })
-        .collect();
-    arm.model
-        .base_from_flange(&q?)
-        .ok()
-        .map(|f| f * *flange_from_tcp)
+        .collect()
 }
 
 #[cfg(test)]

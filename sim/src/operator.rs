@@ -367,6 +367,7 @@ impl ScriptedOperator {
             let tcp = layout.world_from_base.inverse() * fingertips * layout.fingertips_from_tcp();
             out.push(ArmCommand {
                 pose: Some(tcp),
+                joints: None,
                 gripper_width_m: Some(a.gripper(t_s)),
             });
         }

@@ -18,10 +18,13 @@ use crate::task::{Task, TaskState};
 
 /// What one arm is told to do; `None` fields keep the previous command (a controller holds its
 /// last target).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct ArmCommand {
     /// The TCP target, `base_from_tcp`, in the arm's base frame.
     pub pose: Option<DMat4>,
+    /// Joint targets (rad, the rig's joint order), as a leader arm sends them: what a
+    /// joint-commanded simulator (ALOHA) takes; the built-in cell tracks their TCP pose.
+    pub joints: Option<Vec<f64>>,
     /// The gripper opening target (m).
     pub gripper_width_m: Option<f64>,
 }
@@ -142,8 +145,14 @@ impl World {
     /// shorter slice leaves the remaining arms' commands as they were). Non-finite commands are
     /// ignored. Every controller tick that falls due within the step runs, in time order.
     pub fn step(&mut self, dt_s: f64, commands: &[ArmCommand]) {
-        for (arm, cmd) in self.arms.iter_mut().zip(commands) {
-            if let Some(p) = cmd.pose.filter(|p| p.is_finite()) {
+        for ((arm, layout), cmd) in self.arms.iter_mut().zip(self.scene.arms()).zip(commands) {
+            // Joint targets: the cell's Cartesian controller tracks their TCP pose.
+            let from_joints = || {
+                let q = cmd.joints.as_ref()?;
+                (q.len() == layout.home_q.len())
+                    .then(|| layout.base_from_flange(q) * layout.flange_from_tcp)
+            };
+            if let Some(p) = cmd.pose.or_else(from_joints).filter(|p| p.is_finite()) {
                 arm.target = p;
             }
             if let Some(w) = cmd.gripper_width_m.filter(|w| w.is_finite()) {

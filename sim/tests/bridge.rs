@@ -85,7 +85,7 @@ fn seeds_fix_scenes_and_the_experts_commands_replay_its_episode() {
     while !obs.success && !obs.done {
         obs = bridge.expert_step(false).unwrap();
         assert_eq!(obs.commands.len(), 1);
-        commands.push(obs.commands[0]);
+        commands.push(obs.commands[0].clone());
     }
     assert!(obs.success, "the expert solves pick-place seed 5");
     let end = obs.arms[0].flange;
@@ -116,7 +116,7 @@ fn bad_input_is_one_clear_error() {
     let rig = rig("reach");
     let mut bridge = Bridge::spawn(&rig).unwrap();
     bridge.reset(0, false).unwrap();
-    let two = [scaledp_sim::ArmCommand::default(); 2];
+    let two = vec![scaledp_sim::ArmCommand::default(); 2];
     let e = bridge.step(&two, false).unwrap_err().to_string();
     assert!(
         e.contains("metaworld/reach: step") && e.contains("one arm"),

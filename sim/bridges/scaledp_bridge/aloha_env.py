@@ -103,6 +103,19 @@ def _at(waypoints, t: int) -> np.ndarray:
     return np.concatenate([np.asarray(x, float), np.asarray(q, float), [g]])
 
 
+class _Blind:
+    """gym-aloha's tasks render three 480x640 cameras into every observation (most of a step's
+    time); the bridge renders its own cameras at the rig's size, so the tasks' observations
+    carry the state alone (what the expert and the reward read)."""
+
+    def get_observation(self, physics):
+        obs = {"qpos": self.get_qpos(physics), "gripper_ctrl": physics.data.ctrl.copy()}
+        if physics.model.nmocap:
+            obs["mocap_pose_left"] = np.concatenate([physics.data.mocap_pos[0], physics.data.mocap_quat[0]])
+            obs["mocap_pose_right"] = np.concatenate([physics.data.mocap_pos[1], physics.data.mocap_quat[1]])
+        return obs
+
+
 class AlohaEnv:
     """One gym-aloha task behind the bridge protocol."""
 
@@ -129,7 +142,7 @@ class AlohaEnv:
             # The two physics settings the ACT expert needs under MuJoCo 3.
             if m.neq:
                 m.eq_data[:, 10] = 30.0
-            m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MULTICCD
+            m.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
             m.vis.quality.shadowsize = 0
             m.vis.quality.offsamples = 0
             return control.Environment(physics, task_obj, float("inf"), control_timestep=DT,
@@ -139,27 +152,33 @@ class AlohaEnv:
         if self.task == "transfer_cube":
             base_ee = ee_tasks.TransferCubeEndEffectorTask
 
-            class SeededEE(base_ee):
+            class SeededEE(_Blind, base_ee):
                 def initialize_episode(self, physics):
                     self.initialize_robots(physics)
                     i = physics.model.name2id("red_box_joint", "joint")
                     np.copyto(physics.data.qpos[i:i + 7], seeded.objects)
                     base_ee.__mro__[2].initialize_episode(self, physics)
 
+            class Joint(_Blind, joint_tasks.TransferCubeTask):
+                pass
+
             self.ee = make("bimanual_viperx_end_effector_transfer_cube.xml", SeededEE())
-            self.joint = make("bimanual_viperx_transfer_cube.xml", joint_tasks.TransferCubeTask())
+            self.joint = make("bimanual_viperx_transfer_cube.xml", Joint())
         else:
             base_ee = ee_tasks.InsertionEndEffectorTask
 
-            class SeededEE(base_ee):
+            class SeededEE(_Blind, base_ee):
                 def initialize_episode(self, physics):
                     self.initialize_robots(physics)
                     i = physics.model.name2id("red_peg_joint", "joint")
                     np.copyto(physics.data.qpos[i:i + 14], seeded.objects)
                     base_ee.__mro__[2].initialize_episode(self, physics)
 
+            class Joint(_Blind, joint_tasks.InsertionTask):
+                pass
+
             self.ee = make("bimanual_viperx_end_effector_insertion.xml", SeededEE())
-            self.joint = make("bimanual_viperx_insertion.xml", joint_tasks.InsertionTask())
+            self.joint = make("bimanual_viperx_insertion.xml", Joint())
         self.physics = self.joint.physics
         known = [self.physics.model.id2name(i, "camera") for i in range(self.physics.model.ncam)]
         for c in cameras:
@@ -176,6 +195,7 @@ class AlohaEnv:
         self.last = None
         self.success = False
         self._gripper = [1.0, 1.0]
+        self._target = [np.zeros(6), np.zeros(6)]
 
     def hello(self) -> Dict[str, Any]:
         arms = [{"joints": [f"vx300s_{side}/{j}" for j in ARM_JOINTS],
@@ -248,6 +268,9 @@ class AlohaEnv:
         self.step_index = 0
         self.success = False
         self._gripper = [float(self.plan[0][6]), float(self.plan[0][13])]
+        # No command yet: each arm holds its starting posture.
+        q = self.physics.data.qpos
+        self._target = [q[0:6].copy(), q[8:14].copy()]
         return self._observation(req.get("render", True), 0.0)
 
     def _act(self, action: np.ndarray, render: bool) -> Reply:
@@ -261,12 +284,17 @@ class AlohaEnv:
         cmds = req.get("commands") or []
         if len(cmds) != 2:
             raise ValueError(f"ALOHA has two arms: {len(cmds)} commands")
-        q = self.physics.data.qpos
         action = np.zeros(14)
         for k, c in enumerate(cmds):
             joints = c.get("joints")
-            held = q[8 * k:8 * k + 6]
-            action[7 * k:7 * k + 6] = held if joints is None else np.asarray(joints, dtype=np.float64)
+            if joints is None and c.get("pose") is not None:
+                raise ValueError("ALOHA's arms take joint targets (a leader arm's JointState), "
+                                 "not TCP poses")
+            if joints is not None:
+                if len(joints) != 6:
+                    raise ValueError(f"arm {k}: {len(joints)} joint targets, not 6")
+                self._target[k] = np.asarray(joints, dtype=np.float64)
+            action[7 * k:7 * k + 6] = self._target[k]
             w = c.get("gripper_width_m")
             if w is not None:
                 self._gripper[k] = float(np.clip(normalized_of(float(w)), 0.0, 1.0))
@@ -280,6 +308,7 @@ class AlohaEnv:
         commands = [{"joints": a[7 * k:7 * k + 6].tolist(), "gripper_width_m": width_of(a[7 * k + 6])}
                     for k in range(2)]
         self._gripper = [float(a[6]), float(a[13])]
+        self._target = [a[0:6].copy(), a[7:13].copy()]
         header, blobs = self._act(np.asarray(a), req.get("render", True))
         header["commands"] = commands
         return header, blobs

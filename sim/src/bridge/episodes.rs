@@ -6,6 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use scaledp_recorder::keys::{bridge_key, rmw_key, RmwAttachment};
 use scaledp_recorder::now_ns;
+use scaledp_schema::rig::CommandType;
 use scaledp_schema::{Rig, RosMessage};
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
@@ -150,11 +151,28 @@ impl Publishers {
         Ok(())
     }
 
-    /// Publishes per arm its TCP target and gripper opening (where the rig has command topics).
+    /// Publishes per arm its target (a TCP pose or joint targets, as the arm's command type
+    /// says; joint targets on a pose topic go as their TCP pose) and gripper opening, where the
+    /// rig has command topics.
     pub fn commands(&mut self, commands: &[ArmCommand], stamp_ns: u64) -> Result<()> {
         for (i, (arm, c)) in self.rig.arms.iter().zip(commands).enumerate() {
-            if let (Some(pose), Some(t)) = (c.pose, self.poses[i].as_mut()) {
-                t.put(messages::pose_command(arm, &pose, stamp_ns).to_cdr())?;
+            if let Some(t) = self.poses[i].as_mut() {
+                match (arm.command_type.unwrap_or_default(), &c.joints, c.pose) {
+                    (CommandType::JointState, Some(q), _) => {
+                        t.put(messages::joint_state_of(arm, q, stamp_ns).to_cdr())?;
+                    }
+                    (CommandType::PoseStamped, _, Some(pose)) => {
+                        t.put(messages::pose_command(arm, &pose, stamp_ns).to_cdr())?;
+                    }
+                    (CommandType::PoseStamped, Some(q), None) => {
+                        let tcp = crate::scene::flange_from_tcp(arm);
+                        if let Ok(flange) = arm.model.base_from_flange(q) {
+                            let pose = flange * tcp;
+                            t.put(messages::pose_command(arm, &pose, stamp_ns).to_cdr())?;
+                        }
+                    }
+                    _ => {}
+                }
             }
             let g = arm.gripper.as_ref();
             if let (Some(g), Some(w), Some(t)) =

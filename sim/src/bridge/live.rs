@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 use scaledp_recorder::keys::{bridge_key, rmw_key_expr};
 use scaledp_recorder::now_ns;
 use scaledp_schema::msg::{Clock, JointState, PoseStamped, Time};
+use scaledp_schema::rig::CommandType;
 use scaledp_schema::{Rig, RosMessage};
 use serde::Serialize;
 use zenoh::sample::Sample;
@@ -130,7 +131,8 @@ impl LiveBridge {
             for (i, arm) in rig.arms.iter().enumerate() {
                 let mut topics = Vec::new();
                 if let Some(t) = &arm.command_topic {
-                    topics.push((t.clone(), "geometry_msgs/msg/PoseStamped", false));
+                    let ty = arm.command_type.unwrap_or_default().message_type();
+                    topics.push((t.clone(), ty, false));
                 }
                 if let Some(t) = arm.gripper.as_ref().and_then(|g| g.command_topic.clone()) {
                     topics.push((t, "sensor_msgs/msg/JointState", true));
@@ -240,6 +242,16 @@ fn command(sh: &Shared, i: usize, arm: &scaledp_schema::rig::Arm, gripper: bool,
         };
         if js.header.stamp.as_ns() >= start {
             slot.gripper_width_m = messages::read_gripper_command(g, &js).or(slot.gripper_width_m);
+        }
+    } else if arm.command_type == Some(CommandType::JointState) {
+        // A leader arm's joints: passed through as joint targets.
+        if let Ok(js) = JointState::from_cdr(&bytes) {
+            if js.header.stamp.as_ns() >= start {
+                if let Some(q) = messages::read_joints(arm, &js) {
+                    slot.joints = Some(q);
+                    slot.pose = None;
+                }
+            }
         }
     } else if let Ok(p) = PoseStamped::from_cdr(&bytes) {
         if p.header.stamp.as_ns() >= start {

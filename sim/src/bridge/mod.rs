@@ -137,6 +137,7 @@ fn pose_array(t: &DMat4) -> [f64; 7] {
 fn command_json(c: &ArmCommand) -> Value {
     json!({
         "pose": c.pose.map(|p| pose_array(&p)),
+        "joints": c.joints,
         "gripper_width_m": c.gripper_width_m,
     })
 }
@@ -149,8 +150,12 @@ fn command_from_json(v: &Value) -> ArmCommand {
             DMat4::from_rotation_translation(q, DVec3::new(f[0], f[1], f[2]))
         })
     });
+    let joints = v["joints"]
+        .as_array()
+        .map(|a| a.iter().filter_map(Value::as_f64).collect());
     ArmCommand {
         pose,
+        joints,
         gripper_width_m: v["gripper_width_m"].as_f64(),
     }
 }

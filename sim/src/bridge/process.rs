@@ -24,6 +24,10 @@ const SOURCES: &[(&str, &str)] = &[
         "metaworld_env.py",
         include_str!("../../bridges/scaledp_bridge/metaworld_env.py"),
     ),
+    (
+        "aloha_env.py",
+        include_str!("../../bridges/scaledp_bridge/aloha_env.py"),
+    ),
 ];
 
 /// The environment variable naming the Python to run the bridge with.

@@ -176,10 +176,10 @@ fn the_wrist_camera_moves_with_the_arm_and_sees_the_cube_from_above() {
         * layout.fingertips_from_tcp();
     let cmd = crate::world::ArmCommand {
         pose: Some(tcp),
-        gripper_width_m: None,
+        ..Default::default()
     };
     for _ in 0..300 {
-        world.step(0.01, &[cmd]);
+        world.step(0.01, std::slice::from_ref(&cmd));
     }
     let b = world.state();
     assert_ne!(a.arms[0].q, b.arms[0].q);

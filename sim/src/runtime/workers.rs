@@ -70,7 +70,10 @@ impl Shared {
 
     fn push_command(&self, arm: usize, cmd: ArmCommand) {
         if let Some(p) = lock(&self.pending).get_mut(arm) {
-            p.pose = cmd.pose.or(p.pose);
+            if cmd.pose.is_some() || cmd.joints.is_some() {
+                p.pose = cmd.pose;
+                p.joints = cmd.joints;
+            }
             p.gripper_width_m = cmd.gripper_width_m.or(p.gripper_width_m);
         }
     }
@@ -100,8 +103,8 @@ pub(crate) fn on_command(shared: &Shared, arm: usize, gripper: bool, s: &Sample)
             return;
         };
         ArmCommand {
-            pose: None,
             gripper_width_m: messages::read_gripper_command(g, &js),
+            ..ArmCommand::default()
         }
     } else {
         let stamp_ns = scaledp_schema::msg::header_stamp(&bytes).map_or(0, |t| t.as_ns());
@@ -121,7 +124,7 @@ pub(crate) fn on_command(shared: &Shared, arm: usize, gripper: bool, s: &Sample)
         }
         ArmCommand {
             pose,
-            gripper_width_m: None,
+            ..ArmCommand::default()
         }
     };
     shared.push_command(arm, cmd);

@@ -16,6 +16,7 @@ fn go(world: &mut World, arm: usize, p: DVec3, width_m: f64, seconds: f64) {
     let mut cmds = vec![ArmCommand::default(); world.scene().arms().len()];
     cmds[arm] = ArmCommand {
         pose: Some(tcp),
+        joints: None,
         gripper_width_m: Some(width_m),
     };
     for _ in 0..(seconds * 100.0).round() as usize {
@@ -137,6 +138,7 @@ fn stepping_is_deterministic_and_independent_of_the_step_size() {
             ArmCommand::default(),
             ArmCommand {
                 pose: Some(target),
+                joints: None,
                 gripper_width_m: Some(0.01),
             },
         ];
