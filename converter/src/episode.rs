@@ -7,6 +7,9 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use scaledp_codec::{EncodedVideo, VideoEncoder, VideoSettings};
 use scaledp_schema::rig::Rig;
+use scaledp_schema::ActionSpace;
+
+pub use scaledp_schema::action::state_names;
 
 use crate::actions::command_actions;
 use crate::align::{align, Alignment, AlignmentReport, Stream};
@@ -52,6 +55,8 @@ pub struct Episode {
     pub joints: Vec<f32>,
     /// Names of the state/action dimensions.
     pub state_names: Vec<String>,
+    /// The space of the state and action.
+    pub action_space: ActionSpace,
     /// Names of the joint dimensions.
     pub joint_names: Vec<String>,
     /// Per camera.
@@ -77,24 +82,6 @@ impl Episode {
     pub fn is_empty(&self) -> bool {
         self.timestamps.is_empty()
     }
-}
-
-/// State and action names: `x, y, z, roll, pitch, yaw, gripper` per arm, prefixed `<arm>_`
-/// when the rig has more than one arm; arms in rig order.
-pub fn state_names(rig: &Rig) -> Vec<String> {
-    let dims = ["x", "y", "z", "roll", "pitch", "yaw", "gripper"];
-    rig.arms
-        .iter()
-        .flat_map(|a| {
-            dims.iter().map(move |d| {
-                if rig.arms.len() > 1 {
-                    format!("{}_{d}", a.name)
-                } else {
-                    (*d).to_string()
-                }
-            })
-        })
-        .collect()
 }
 
 /// The rig, rate and task an input is converted with: `--rig`, else the rig stored in the
@@ -226,7 +213,8 @@ fn arm_series(
     Ok((series, kin))
 }
 
-/// Per tick: the state (TCP pose with unwrapped angles, gripper opening, per arm) and the joint
+/// Per tick: the state (per arm the TCP pose with unwrapped angles, or with
+/// [`ActionSpace::Joints`] the joint positions, then the gripper opening) and the joint
 /// positions (arm then gripper joints, per arm).
 struct TickRows {
     state: Vec<Vec<f32>>,
@@ -240,6 +228,7 @@ fn tick_states(
     series: &[JointSeries],
     kin: &[ArmKinematics],
     aligned: &Alignment,
+    space: ActionSpace,
 ) -> Result<TickRows> {
     let n_ticks = aligned.ticks_ns.len();
     let mut state_ticks = vec![Vec::new(); n_ticks];
@@ -260,6 +249,7 @@ fn tick_states(
             joint_ticks[t].extend(q.iter().map(|&x| x as f32));
         }
         unwrap_pose_angles(&mut poses);
+        let grip_joints = arm.gripper.as_ref().map_or(0, |g| g.joint_names.len());
         for (t, pose) in poses.iter().enumerate() {
             let width = match (grip_series, &arm.gripper) {
                 (Some(g), Some(gr)) => {
@@ -269,7 +259,15 @@ fn tick_states(
                 }
                 _ => 0.0,
             };
-            state_ticks[t].extend(pose.iter().map(|&v| v as f32));
+            match space {
+                ActionSpace::Tcp => state_ticks[t].extend(pose.iter().map(|&v| v as f32)),
+                ActionSpace::Joints => {
+                    let n = arm.joint_names.len();
+                    let q = &joint_ticks[t];
+                    let at = q.len() - n - grip_joints;
+                    state_ticks[t].extend_from_slice(&q[at..at + n]);
+                }
+            }
             state_ticks[t].push(width as f32);
         }
     }
@@ -380,7 +378,7 @@ pub fn convert(
     let TickRows {
         state: state_ticks,
         joints: joint_ticks,
-    } = tick_states(path, &rig, &series, &kin, &aligned)?;
+    } = tick_states(path, &rig, &series, &kin, &aligned, opts.action_space)?;
     // The action is the next tick's state: the last tick has none and is dropped. An arm with a
     // command topic takes its pose from the latest command at the tick instead (its gripper
     // from its gripper's command topic, if any, else still from the next tick).
@@ -437,7 +435,8 @@ pub fn convert(
         source: path.into(),
         task,
         fps,
-        state_names: state_names(&rig),
+        state_names: state_names(&rig, opts.action_space),
+        action_space: opts.action_space,
         joint_names,
         rig,
         timestamps,

@@ -454,7 +454,7 @@ mod tests {
             let text = String::from_utf8_lossy(data);
             if let Ok(mut rig) = scaledp_schema::Rig::parse(&text, Path::new("rig.toml")) {
                 let _ = rig.topics();
-                let _ = crate::episode::state_names(&rig);
+                let _ = crate::episode::state_names(&rig, scaledp_schema::ActionSpace::Joints);
                 let o = [("wrist".to_string(), "/x".to_string())];
                 let _ = crate::detect::override_topics(Path::new("x"), &mut rig, &o);
             }

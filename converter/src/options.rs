@@ -4,6 +4,7 @@
 //! one another in one direction only (inputs → frames → encode → episode → batch).
 
 use scaledp_schema::rig::Rig;
+use scaledp_schema::ActionSpace;
 
 use crate::images::EncodeSpec;
 use scaledp_codec::Codec;
@@ -69,6 +70,9 @@ pub struct ConvertOptions {
     /// Store cameras as video features in this codec instead of JPEG images.
     #[doc(hidden)]
     pub video: Option<Codec>,
+    /// The space of `observation.state` and `action`.
+    #[doc(hidden)]
+    pub action_space: ActionSpace,
 }
 
 impl ConvertOptions {
@@ -133,6 +137,13 @@ impl ConvertOptions {
         self.video = codec;
         self
     }
+    /// The space of `observation.state` and `action` (default [`ActionSpace::Tcp`]: 6D TCP
+    /// poses by forward kinematics; [`ActionSpace::Joints`]: joint positions), gripper
+    /// openings in both.
+    pub fn action_space(mut self, space: ActionSpace) -> Self {
+        self.action_space = space;
+        self
+    }
     /// Whether a message logged at `log_ns` is inside the window converted.
     pub(crate) fn in_window(&self, log_ns: u64) -> bool {
         self.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns))
@@ -168,6 +179,7 @@ impl Default for ConvertOptions {
             topic_overrides: Vec::new(),
             reorder_window_s: 0.1,
             video: None,
+            action_space: ActionSpace::Tcp,
         }
     }
 }

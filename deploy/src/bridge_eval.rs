@@ -56,12 +56,10 @@ fn feed(
 /// Writes a tick's commands into the rollout.
 fn record_commands(rig: &Rig, cmds: &[ArmCommand], t_ns: u64, r: &mut Rollout) -> Result<()> {
     for (arm, c) in rig.arms.iter().zip(cmds) {
-        if let (Some(topic), Some(pose)) = (&arm.command_topic, c.pose) {
-            r.write(
-                topic,
-                t_ns,
-                &messages::pose_command(arm, &pose, t_ns).to_cdr(),
-            )?;
+        if let (Some(topic), Some(m)) =
+            (&arm.command_topic, messages::arm_command_cdr(arm, c, t_ns))
+        {
+            r.write(topic, t_ns, &m)?;
         }
         if let Some(g) = &arm.gripper {
             if let (Some(topic), Some(w)) = (&g.command_topic, c.gripper_width_m) {
@@ -143,12 +141,7 @@ pub fn run_bridge_eval(
                 Ok(cmds) => {
                     rep.commanded_ticks += 1;
                     rep.clamped_ticks += u64::from(cmds.iter().any(|c| c.clamped.any()));
-                    cmds.iter()
-                        .map(|c| ArmCommand {
-                            pose: Some(c.base_from_tcp),
-                            gripper_width_m: c.gripper_width_m,
-                        })
-                        .collect()
+                    cmds.iter().map(ArmCommand::from).collect()
                 }
                 // Filling the window or halted: the simulator holds the last target.
                 Err(_) => vec![ArmCommand::default(); rig.arms.len()],

@@ -2,7 +2,7 @@
 //! the checkpoint's side and the rig's.
 
 use scaledp_policy::CheckpointConfig;
-use scaledp_schema::rig::{CommandType, Rig};
+use scaledp_schema::rig::Rig;
 
 use crate::error::{Error, Result};
 
@@ -38,8 +38,8 @@ pub fn trained_rig_name(cfg: &CheckpointConfig) -> Option<String> {
 
 /// Checks that `cfg` (a checkpoint's config, `ckpt` its name for messages) can drive `rig`:
 /// the rig it was trained for (when it names one), every camera it reads, its state and action
-/// names (the converter's `x, y, z, roll, pitch, yaw, gripper` per arm), and a `PoseStamped`
-/// command topic on every arm. Returns the rig camera index of each checkpoint camera.
+/// names (the converter's, in the checkpoint's action space), and a command topic on every arm
+/// (a `PoseStamped` or a leader's `JointState`: [`crate::controller`] converts between the two). Returns the rig camera index of each checkpoint camera.
 pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>> {
     let bad = |m: String| Err(Error::Incompatible(m));
     if let Some(trained) = trained_rig_name(cfg) {
@@ -64,7 +64,7 @@ pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>
             }
         }
     }
-    let names = scaledp_converter::state_names(rig);
+    let names = scaledp_converter::state_names(rig, cfg.action_space);
     for (what, dim, got) in [
         ("state", cfg.model.state_dim, &cfg.state_names),
         ("action", cfg.model.action_dim, &cfg.action_names),
@@ -82,13 +82,7 @@ pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>
     for arm in &rig.arms {
         if arm.command_topic.is_none() {
             return bad(format!(
-                "rig {}: arm '{}' has no command_topic: nothing to send its TCP targets to",
-                rig.name, arm.name
-            ));
-        }
-        if arm.command_type.unwrap_or_default() != CommandType::PoseStamped {
-            return bad(format!(
-                "rig {}: arm '{}' takes joint-state commands; serve sends PoseStamped TCP targets",
+                "rig {}: arm '{}' has no command_topic: nothing to send its targets to",
                 rig.name, arm.name
             ));
         }

@@ -17,18 +17,18 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use glam::{DMat4, DVec3};
+use glam::DMat4;
 use scaledp_converter::live::{self, ArmKinematics, EncodeSpec};
 use scaledp_converter::Serialization;
 use scaledp_policy::{ActionChunk, CheckpointConfig, ImageChain, Observation};
-use scaledp_schema::kinematics::rotation_from_rpy;
 use scaledp_schema::msg::JointState;
 use scaledp_schema::rig::Gripper;
-use scaledp_schema::Rig;
+use scaledp_schema::{ActionSpace, Rig};
 
+use crate::command::{arm_target, Previous};
 use crate::error::{Error, Result};
 pub use crate::options::ControlOptions;
-use crate::safety::{clamp_pose, Clamped, Limits, Workspace};
+use crate::safety::{Clamped, Limits, Workspace};
 use crate::streams::Series;
 pub use crate::tick::{Command, Request, Tick};
 
@@ -62,8 +62,9 @@ pub struct Controller {
     pending: Option<u64>,
     next_request: u64,
     lead_ticks: u64,
-    last_command: Vec<Option<DMat4>>,
+    last_command: Vec<Option<(DMat4, Vec<f64>)>>,
     measured: Vec<DMat4>,
+    measured_q: Vec<Vec<f64>>,
     halted: Option<String>,
     obs_lag_ns: u64,
 }
@@ -190,6 +191,11 @@ impl Controller {
             lead_ticks: 0,
             last_command: vec![None; n],
             measured: vec![DMat4::IDENTITY; n],
+            measured_q: rig
+                .arms
+                .iter()
+                .map(|a| vec![0.0; a.joint_names.len()])
+                .collect(),
             halted: None,
             obs_lag_ns: (obs_lag_s * 1e9).round() as u64,
             opts,
@@ -414,7 +420,8 @@ impl Controller {
             scaledp_datasets::decode_image(&jpeg, w, h, &mut images[k * per..(k + 1) * per])
                 .map_err(|e| format!("{}: {}", series.name, String::from(e)))?;
         }
-        let mut state = Vec::with_capacity(7 * self.arms.len());
+        let space = self.cfg.action_space;
+        let mut state = Vec::with_capacity(space.dim(&self.rig));
         let tick_s = self.period_ns * 1e-9;
         for a in 0..self.arms.len() {
             let q = self.arms[a]
@@ -424,6 +431,7 @@ impl Controller {
                 .base_from_tcp(&q)
                 .map_err(|e| format!("{}: {e}", self.arms[a].name))?;
             self.measured[a] = base_from_tcp;
+            self.measured_q[a].clone_from(&q);
             let mut pose = scaledp_schema::kinematics::pose6_from_transform(base_from_tcp);
             if let Some(prev) = self.prev_pose[a] {
                 for d in 3..6 {
@@ -442,7 +450,10 @@ impl Controller {
                 }
                 _ => 0.0,
             };
-            state.extend(pose.iter().map(|&v| v as f32));
+            match space {
+                ActionSpace::Tcp => state.extend(pose.iter().map(|&v| v as f32)),
+                ActionSpace::Joints => state.extend(q.iter().map(|&v| v as f32)),
+            }
             state.push(width as f32);
         }
         // The frozen-cameras control: every window shows the episode's first frames.
@@ -490,32 +501,44 @@ impl Controller {
             self.stop("non-finite action");
             return Err(format!("the policy's action value {k} is {}", action[k]));
         }
+        let space = self.cfg.action_space;
         let mut out = Vec::with_capacity(self.arms.len());
         for a in 0..self.arms.len() {
-            let v: Vec<f64> = action[7 * a..7 * a + 7]
+            let v: Vec<f64> = action[space.arm_range(&self.rig, a)]
                 .iter()
                 .map(|&x| f64::from(x))
                 .collect();
-            let target = DMat4::from_translation(DVec3::new(v[0], v[1], v[2]))
-                * DMat4::from_mat3(rotation_from_rpy([v[3], v[4], v[5]]));
-            let previous = self.last_command[a].unwrap_or(self.measured[a]);
+            let (tcp, joints) = match &self.last_command[a] {
+                Some((t, q)) => (*t, q.as_slice()),
+                None => (self.measured[a], self.measured_q[a].as_slice()),
+            };
+            let previous = Previous { tcp, joints };
             let mut clamped = Clamped::default();
-            let pose = clamp_pose(
-                target,
-                previous,
-                &self.limits.workspace[a],
+            let (arm, ws) = (&self.rig.arms[a], &self.limits.workspace[a]);
+            let target = arm_target(
+                arm,
+                &self.kin[a],
+                space,
+                &v[..v.len() - 1],
+                &previous,
+                ws,
                 &self.limits,
                 &mut clamped,
             );
+            let grip = v[v.len() - 1];
             let gripper_width_m = self.grippers[a].as_ref().map(|g| {
                 let max = g.model.max_width_m();
-                clamped.gripper |= !(0.0..=max).contains(&v[6]);
-                v[6].clamp(0.0, max)
+                clamped.gripper |= !(0.0..=max).contains(&grip);
+                grip.clamp(0.0, max)
             });
-            self.last_command[a] = Some(pose);
+            // The joints this command leaves the arm at: its own, or (a TCP command) where
+            // the last ones were, for the next command's inverse kinematics to start from.
+            let q = target.joints.clone().unwrap_or_else(|| joints.to_vec());
+            self.last_command[a] = Some((target.base_from_tcp, q));
             out.push(Command {
                 arm: a,
-                base_from_tcp: pose,
+                base_from_tcp: target.base_from_tcp,
+                joints: target.joints,
                 gripper_width_m,
                 clamped,
             });

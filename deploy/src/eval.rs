@@ -427,9 +427,9 @@ fn episode(
                 if let Some(r) = rollout.as_deref_mut() {
                     for c in &cmds {
                         let arm = &rig.arms[c.arm];
-                        if let Some(topic) = &arm.command_topic {
-                            let m = messages::pose_command(arm, &c.base_from_tcp, abs);
-                            r.write(topic, abs, &m.to_cdr())?;
+                        let m = messages::arm_command_cdr(arm, &ArmCommand::from(c), abs);
+                        if let (Some(topic), Some(m)) = (&arm.command_topic, m) {
+                            r.write(topic, abs, &m)?;
                         }
                         if let (Some(g), Some(w)) = (&arm.gripper, c.gripper_width_m) {
                             if let Some(topic) = &g.command_topic {
@@ -439,13 +439,7 @@ fn episode(
                         }
                     }
                 }
-                let arm_cmds: Vec<ArmCommand> = cmds
-                    .iter()
-                    .map(|c| ArmCommand {
-                        pose: Some(c.base_from_tcp),
-                        gripper_width_m: c.gripper_width_m,
-                    })
-                    .collect();
+                let arm_cmds: Vec<ArmCommand> = cmds.iter().map(ArmCommand::from).collect();
                 world.step(0.0, &arm_cmds);
             }
             let task = world.task_state();

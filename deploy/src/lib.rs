@@ -21,6 +21,7 @@
 
 mod bridge_eval;
 pub mod check;
+mod command;
 pub mod controller;
 mod error;
 pub mod eval;

@@ -29,14 +29,28 @@ pub struct Tick {
 }
 
 /// One arm's command.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Command {
     /// Arm index (rig order).
     pub arm: usize,
-    /// TCP target, `base_from_tcp`, clamped.
+    /// TCP target, `base_from_tcp`, clamped (for a joint action, the TCP its joints reach).
     pub base_from_tcp: DMat4,
+    /// Joint targets (rad, rig order), clamped, for an arm whose command topic takes a leader
+    /// arm's `JointState`; `None` for an arm taking TCP targets.
+    pub joints: Option<Vec<f64>>,
     /// Gripper opening (m), clamped; `None` for an arm without gripper.
     pub gripper_width_m: Option<f64>,
     /// What was clamped.
     pub clamped: Clamped,
+}
+
+impl From<&Command> for scaledp_sim::ArmCommand {
+    /// What the simulator takes: the joints for an arm commanded in joints, else the TCP.
+    fn from(c: &Command) -> Self {
+        scaledp_sim::ArmCommand {
+            pose: c.joints.is_none().then_some(c.base_from_tcp),
+            joints: c.joints.clone(),
+            gripper_width_m: c.gripper_width_m,
+        }
+    }
 }

@@ -112,6 +112,10 @@ pub struct CheckpointConfig {
     pub state_names: Vec<String>,
     /// Names of the action dimensions.
     pub action_names: Vec<String>,
+    /// The space of the state and action (the dataset's `scaledp.action_space`; absent in
+    /// checkpoints written before joint space: TCP poses).
+    #[serde(default)]
+    pub action_space: scaledp_schema::ActionSpace,
     /// Control rate of the dataset (actions per second).
     pub fps: f64,
     /// `robot_type` of the dataset's `meta/info.json`, when it has one.

@@ -17,11 +17,11 @@
 
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use scaledp_schema::msg::{Header, Image, JointState, Point, Pose, PoseStamped, Quaternion, Time};
-use scaledp_schema::rig::{Arm, Camera, Gripper};
-use scaledp_schema::RobotModel;
+use scaledp_schema::rig::{Arm, Camera, CommandType, Gripper};
+use scaledp_schema::{RobotModel, RosMessage};
 
 use crate::render;
-use crate::world::ArmState;
+use crate::world::{ArmCommand, ArmState};
 
 /// The frame a pose command of `arm` is expressed in: `<prefix>link0` for Franka arms (the
 /// joint names' prefix, e.g. `fr3_link0`), `<prefix>base` for UR arms (ur_description's `base`,
@@ -102,6 +102,24 @@ pub fn image(cam: &Camera, pixels: Vec<u8>, stamp_ns: u64) -> Image {
         is_bigendian: 0,
         step: cam.width * channels,
         data: pixels,
+    }
+}
+
+/// What arm `arm`'s command topic carries for `cmd` (CDR), by the rig's command type: a
+/// `JointState` of its joint targets, or a `PoseStamped` of its TCP target (joint targets on a
+/// pose topic go as their TCP pose, by forward kinematics). `None` when the command holds
+/// nothing that topic carries (a bare pose for a joint topic would need inverse kinematics).
+pub fn arm_command_cdr(arm: &Arm, cmd: &ArmCommand, stamp_ns: u64) -> Option<Vec<u8>> {
+    match (arm.command_type.unwrap_or_default(), &cmd.joints, cmd.pose) {
+        (CommandType::JointState, Some(q), _) => Some(joint_state_of(arm, q, stamp_ns).to_cdr()),
+        (CommandType::PoseStamped, _, Some(pose)) => {
+            Some(pose_command(arm, &pose, stamp_ns).to_cdr())
+        }
+        (CommandType::PoseStamped, Some(q), None) => {
+            let pose = arm.model.base_from_flange(q).ok()? * crate::scene::flange_from_tcp(arm);
+            Some(pose_command(arm, &pose, stamp_ns).to_cdr())
+        }
+        _ => None,
     }
 }
 

@@ -548,3 +548,117 @@ fn a_command_topic_gives_the_action_instead_of_the_next_tick() {
         "{text}"
     );
 }
+
+#[test]
+fn joint_space_state_and_action_are_the_joints_in_rig_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = small_bimanual();
+    let ep = dir.path().join("episode_000000.mcap");
+    synth_episode(&ep, &rig, 6, 3.0);
+    let ds = dir.path().join("ds");
+    let convert = |extra: &[&str]| {
+        let mut args = vec![ep.as_os_str(), "--out".as_ref(), ds.as_os_str()];
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        convert_cli(&args)
+    };
+    let out = convert(&["--action", "joints"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let v = check_dataset(&ds);
+    // LeRobot's naming: per arm its joints then its gripper, a joint named after its arm kept.
+    let names: Vec<String> = rig
+        .arms
+        .iter()
+        .flat_map(|a| {
+            let mut n = a.joint_names.clone();
+            n.push(format!("{}_gripper", a.name));
+            n
+        })
+        .collect();
+    assert_eq!(names[0], "left_shoulder_pan_joint");
+    assert_eq!(v["features"]["observation.state"], serde_json::json!(names));
+    assert_eq!(v["features"]["action"], serde_json::json!(names));
+    let info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(ds.join("meta/info.json")).unwrap()).unwrap();
+    assert_eq!(info["scaledp"]["action_space"], "joints");
+    let (state, action, joints) = (
+        f32_rows(&ds, "observation.state"),
+        f32_rows(&ds, "action"),
+        f32_rows(&ds, "observation.joints"),
+    );
+    assert_eq!(state[0].len(), 14);
+    for (t, (s, j)) in state.iter().zip(&joints).enumerate() {
+        for arm in 0..2 {
+            // Joints as measured (interpolated at the tick), the gripper as its opening.
+            assert_eq!(
+                &s[arm * 7..arm * 7 + 6],
+                &j[arm * 7..arm * 7 + 6],
+                "tick {t}"
+            );
+            let g = rig.arms[arm].gripper.as_ref().unwrap();
+            let width = g.model.width_m(&[f64::from(j[arm * 7 + 6])]);
+            assert!((f64::from(s[arm * 7 + 6]) - width).abs() < 1e-6);
+        }
+    }
+    // No command topic carries joints here: the action is the next tick's joints.
+    for t in 0..state.len() - 1 {
+        assert_eq!(action[t], state[t + 1], "tick {t}");
+    }
+    // A TCP conversion cannot join a joint-space dataset: one clear line.
+    let ep2 = dir.path().join("episode_000001.mcap");
+    synth_episode(&ep2, &rig, 7, 2.0);
+    let out = convert_cli(&[ep2.as_os_str(), "--out".as_ref(), ds.as_os_str()]);
+    let text = String::from_utf8_lossy(&out.stdout) + String::from_utf8_lossy(&out.stderr);
+    assert!(
+        text.contains("tcp state and action, the dataset's are joints"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_leader_arms_joint_states_are_the_joint_space_action() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = small_franka();
+    let ep = dir.path().join("episode_000000.mcap");
+    synth_episode(&ep, &rig, 5, 3.0);
+    let arm = &rig.arms[0];
+    // The arm's own joint states as its command topic (a leader arm that is the follower): the
+    // action is the latest command's joints at the tick, i.e. the latest measured sample, no
+    // longer the next tick's.
+    let over = format!("{}_command={}", arm.name, arm.joint_state_topic);
+    let ds = dir.path().join("ds");
+    let out = convert_cli(&[
+        ep.as_os_str(),
+        "--out".as_ref(),
+        ds.as_os_str(),
+        "--action".as_ref(),
+        "joints".as_ref(),
+        "--topic".as_ref(),
+        over.as_ref(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let (state, action) = (f32_rows(&ds, "observation.state"), f32_rows(&ds, "action"));
+    let dist = |a: &[f32], b: &[f32]| (0..7).map(|d| (a[d] - b[d]).powi(2)).sum::<f32>().sqrt();
+    let (mut near_now, mut moving) = (0, 0);
+    for t in 0..state.len() - 1 {
+        let step = dist(&state[t], &state[t + 1]);
+        if step > 1e-3 {
+            moving += 1;
+            if dist(&action[t], &state[t]) < 0.25 * step {
+                near_now += 1;
+            }
+        }
+    }
+    assert!(moving > 5, "the arm hardly moves: {moving} moving ticks");
+    assert_eq!(
+        near_now, moving,
+        "the command's joints, not the next tick's"
+    );
+}

@@ -352,6 +352,11 @@ pub struct ConvertArgs {
     /// yuv420p, a keyframe every 2 frames, CRF 30) instead of JPEG images in the Parquet files.
     #[arg(long, value_enum, value_name = "CODEC")]
     pub video: Option<VideoArg>,
+    /// The space of observation.state and action: tcp (6D TCP pose by forward kinematics and
+    /// gripper opening per arm) or joints (joint positions and gripper opening per arm, a leader
+    /// arm's JointState commands as the action: ALOHA's and LeRobot's convention).
+    #[arg(long = "action", default_value = "tcp", value_parser = parse_action_space)]
+    pub action_space: scaledp_schema::ActionSpace,
     /// Task instruction for inputs that store none (bags).
     #[arg(long)]
     pub task: Option<String>,
@@ -509,8 +514,16 @@ pub struct ViewArgs {
     /// Actions drawn ahead of each frame as the action chunk.
     #[arg(long, default_value_t = 16)]
     pub chunk: usize,
+    /// Show recordings' state and action in this space (tcp or joints), as `scaledp convert
+    /// --action` would convert them; a dataset is shown in its own.
+    #[arg(long = "action", default_value = "tcp", value_parser = parse_action_space)]
+    pub action_space: scaledp_schema::ActionSpace,
     /// A policy checkpoint whose predicted chunks are drawn beside the dataset's (one dataset,
     /// with --episode).
     #[arg(long, value_name = "DIR")]
     pub checkpoint: Option<PathBuf>,
+}
+
+fn parse_action_space(s: &str) -> Result<scaledp_schema::ActionSpace, String> {
+    s.parse()
 }

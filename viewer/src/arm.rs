@@ -112,11 +112,3 @@ pub(crate) fn transform(t: &DMat4) -> Transform3D {
         rerun::datatypes::Mat3x3::from(cols),
     )
 }
-
-/// A line strip through the x, y, z of each row (`row[offset..offset + 3]`).
-pub(crate) fn xyz_strip(rows: &[Vec<f32>], offset: usize) -> Vec<[f32; 3]> {
-    rows.iter()
-        .filter_map(|r| r.get(offset..offset + 3))
-        .map(|p| [p[0], p[1], p[2]])
-        .collect()
-}

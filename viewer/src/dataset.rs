@@ -11,6 +11,7 @@ use rerun::{RecordingStream, TextLog};
 use scaledp_converter::Sidecar;
 use scaledp_datasets::DatasetFiles;
 use scaledp_schema::rig::Rig;
+use scaledp_schema::ActionSpace;
 use serde::Deserialize;
 
 use crate::columns::{image_bytes, ints, strings, vectors};
@@ -148,6 +149,14 @@ impl Dataset {
     }
 
     /// The rig the dataset was converted with (ours), or `rig` given.
+    /// The space of the state and action (the converter's sidecar says; TCP poses without one).
+    fn space(&self) -> ActionSpace {
+        self.sidecar
+            .as_ref()
+            .map(|s| s.action_space)
+            .unwrap_or_default()
+    }
+
     fn rig(&self, given: Option<&Rig>) -> Option<Rig> {
         given.cloned().or_else(|| {
             let s = self.sidecar.as_ref()?;
@@ -224,6 +233,7 @@ impl Dataset {
             action_names: self.feature_names("action"),
             joint_names: self.feature_names("observation.joints"),
             plot_joints: true,
+            space: self.space(),
             ..Rows::default()
         };
         for batch in read(cols, 65536)? {
@@ -369,12 +379,19 @@ impl Dataset {
             .filter(|(_, f)| f.dtype == "image")
             .map(|(k, _)| layout::camera(k.strip_prefix("observation.images.").unwrap_or(k)))
             .collect();
+        let rig = self.rig(rig);
+        let space = self.space();
         layout::Shape {
             cameras,
-            arms: self
-                .rig(rig)
-                .map(|r| r.arms.iter().map(|a| a.name.clone()).collect())
-                .unwrap_or_default(),
+            arms: rig
+                .iter()
+                .flat_map(|r| r.arms.iter().map(|a| a.name.clone()))
+                .collect(),
+            dims: rig
+                .iter()
+                .flat_map(|r| r.arms.iter().map(|a| crate::space::labels(a, space)))
+                .collect(),
+            space,
             topics: Vec::new(),
             quality: false,
             timeline: layout::FRAME_INDEX,

@@ -6,10 +6,12 @@
 
 use rerun::{LineStrips3D, RecordingStream, Scalars, SeriesLines, SeriesPoints, TextLog};
 use scaledp_schema::rig::Rig;
+use scaledp_schema::ActionSpace;
 
-use crate::arm::{xyz_strip, ArmModel};
+use crate::arm::ArmModel;
 use crate::error::{Error, Result};
 use crate::layout;
+use crate::space::Dims;
 
 /// Frames of an episode: state and action rows, and joint positions when stored.
 #[derive(Debug, Default, Clone)]
@@ -29,25 +31,30 @@ pub(crate) struct Rows {
     /// Also plot `joints` (and the gripper opening they give) per frame: for datasets, whose
     /// joint positions exist only at the frames (a recording plots every message instead).
     pub plot_joints: bool,
-    /// Per frame, a policy's predicted chunk (C × 7 values per arm) when one is shown.
+    /// Per frame, a policy's predicted chunk (C × the action's values) when one is shown.
     pub predicted: Vec<Option<Vec<f32>>>,
+    /// The space of the state and action.
+    pub space: ActionSpace,
 }
 
 /// One plotted pair: entity, state index, action index.
 type Pair = (String, Option<usize>, Option<usize>);
 
-/// Which entity each state and action dimension goes to: `pose/<arm>/<dim>` for the rig's
-/// arms (7 dimensions each, rig order), else `pose/<name>` with state and action matched by name.
-fn pairs(rows: &Rows, rig: Option<&Rig>) -> Vec<Pair> {
-    if let Some(rig) =
-        rig.filter(|r| rows.state_names.len() == 7 * r.arms.len() && !r.arms.is_empty())
-    {
+/// Which entity each state and action dimension goes to: per arm of the rig (rig order) its
+/// dimensions in the rows' space ([`layout::state_action`]), else `pose/<name>` with state and
+/// action matched by name.
+fn pairs(rows: &Rows, rig: Option<&Rig>, dims: Option<&Dims>) -> Vec<Pair> {
+    if let (Some(rig), Some(dims)) = (rig, dims.filter(|d| d.fits(rows.state_names.len()))) {
         let mut out = Vec::new();
-        for (a, arm) in rig.arms.iter().enumerate() {
-            for (d, dim) in layout::POSE_DIMS.iter().enumerate() {
-                let i = a * 7 + d;
+        for (arm, a) in rig.arms.iter().zip(&dims.arms) {
+            for (d, label) in a.labels.iter().enumerate() {
+                let i = a.range.start + d;
                 let act = (rows.action_names.len() == rows.state_names.len()).then_some(i);
-                out.push((layout::pose(&arm.name, dim), Some(i), act));
+                out.push((
+                    layout::state_action(dims.space, &arm.name, label),
+                    Some(i),
+                    act,
+                ));
             }
         }
         return out;
@@ -113,7 +120,9 @@ pub(crate) fn log_rows(
     at: &dyn Fn(usize),
 ) -> Result<()> {
     let r = Error::rerun;
-    let pairs = pairs(rows, rig);
+    let dims = rig.map(|rig| Dims::new(rig, rows.space));
+    let pairs = pairs(rows, rig, dims.as_ref());
+    let fits = |n: usize| dims.as_ref().is_some_and(|d| d.fits(n));
     for (entity, s, a) in &pairs {
         let names: Vec<&str> = [s.map(|_| "state"), a.map(|_| "action")]
             .into_iter()
@@ -141,9 +150,8 @@ pub(crate) fn log_rows(
                 )
                 .map_err(r)?;
             }
-            let poses = rows.state_names.len() == 7 * rig.arms.len();
-            if poses {
-                let strip = xyz_strip(&rows.state, 7 * i);
+            if let Some(d) = dims.as_ref().filter(|_| fits(rows.state_names.len())) {
+                let strip = d.tcp_strip(&rows.state, i);
                 rec.log_static(
                     layout::trajectory(name),
                     &LineStrips3D::new([strip]).with_radii([0.003]),
@@ -199,9 +207,10 @@ pub(crate) fn log_rows(
                 rec.log(layout::gripper(&rig.arms[i].name), &Scalars::new([width]))
                     .map_err(r)?;
             }
-            if rows.action_names.len() == 7 * rig.arms.len() && chunk > 0 {
+            let action_dims = dims.as_ref().filter(|_| fits(rows.action_names.len()));
+            if let (Some(d), true) = (action_dims, chunk > 0) {
                 let end = (t + chunk).min(rows.action.len());
-                let strip = xyz_strip(&rows.action[t.min(end)..end], 7 * i);
+                let strip = d.tcp_strip(&rows.action[t.min(end)..end], i);
                 rec.log(
                     layout::action_chunk(&rig.arms[i].name),
                     &LineStrips3D::new([strip])
@@ -210,15 +219,12 @@ pub(crate) fn log_rows(
                 )
                 .map_err(r)?;
             }
-            if let (Some(Some(p)), true) = (
-                rows.predicted.get(t),
-                rows.action_names.len() == 7 * rig.arms.len(),
-            ) {
+            if let (Some(Some(p)), Some(d)) = (rows.predicted.get(t), action_dims) {
                 let dim = rows.action_names.len();
                 let steps: Vec<Vec<f32>> = p.chunks(dim).map(<[f32]>::to_vec).collect();
                 rec.log(
                     layout::predicted_chunk(&rig.arms[i].name),
-                    &LineStrips3D::new([xyz_strip(&steps, 7 * i)])
+                    &LineStrips3D::new([d.tcp_strip(&steps, i)])
                         .with_radii([0.004])
                         .with_colors([0x1e90ffffu32]),
                 )

@@ -6,6 +6,7 @@ use rerun::blueprint::{
     Blueprint, BlueprintPanel, ContainerLike, Grid, Horizontal, SelectionPanel, Spatial2DView,
     Spatial3DView, Tabs, TextLogView, TimePanel, TimeSeriesView, Vertical,
 };
+use scaledp_schema::ActionSpace;
 
 /// Capture (header) stamps, ns since the epoch: every message and tick of a recording.
 pub const CAPTURE_TIME: &str = "capture_time";
@@ -48,6 +49,14 @@ pub fn topic(topic: &str) -> String {
 /// State and action of one dimension of one arm: two series, `state` and `action`.
 pub fn pose(arm: &str, dim: &str) -> String {
     format!("pose/{}/{}", part(arm), part(dim))
+}
+/// A state / action dimension's plot: [`pose`] in TCP space, `joint_space/<arm>/<dim>` (a joint
+/// or the gripper) in joint space.
+pub fn state_action(space: ActionSpace, arm: &str, dim: &str) -> String {
+    match space {
+        ActionSpace::Tcp => pose(arm, dim),
+        ActionSpace::Joints => format!("joint_space/{}/{}", part(arm), part(dim)),
+    }
 }
 /// An arm's base in the 3-D scene.
 pub fn world_arm(arm: &str) -> String {
@@ -105,6 +114,10 @@ pub struct Shape {
     pub cameras: Vec<String>,
     /// Arm names (joint, gripper and pose plots, 3-D).
     pub arms: Vec<String>,
+    /// Per arm, its state / action dimensions' labels (empty: `x` … `gripper`).
+    pub dims: Vec<Vec<String>>,
+    /// The space of the state and action.
+    pub space: ActionSpace,
     /// Other joint-state entity paths.
     pub topics: Vec<String>,
     /// Whether per-tick quality signals are shown.
@@ -130,7 +143,7 @@ pub fn blueprint(shape: &Shape) -> Blueprint {
         })
         .collect();
     let mut tabs: Vec<ContainerLike> = Vec::new();
-    for arm in &shape.arms {
+    for (i, arm) in shape.arms.iter().enumerate() {
         let measured = Horizontal::new(vec![
             TimeSeriesView::new("joints")
                 .with_origin(joints(arm))
@@ -139,9 +152,16 @@ pub fn blueprint(shape: &Shape) -> Blueprint {
                 .with_origin(gripper(arm))
                 .into(),
         ]);
-        let poses = POSE_DIMS
+        let labels: Vec<&str> = match shape.dims.get(i) {
+            Some(d) if !d.is_empty() => d.iter().map(String::as_str).collect(),
+            _ => POSE_DIMS.to_vec(),
+        };
+        let poses = labels
             .iter()
-            .map(|d| ContainerLike::from(TimeSeriesView::new(*d).with_origin(pose(arm, d))))
+            .map(|d| {
+                let origin = state_action(shape.space, arm, d);
+                ContainerLike::from(TimeSeriesView::new(*d).with_origin(origin))
+            })
             .collect();
         tabs.push(
             Vertical::new(vec![measured.into(), grid(poses, "state vs action")])

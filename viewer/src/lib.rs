@@ -23,7 +23,8 @@
 //! | `joints/<arm>` | measured joint positions, one series per joint | per message |
 //! | `gripper/<arm>` | measured gripper opening (m) | per message |
 //! | `topics/<topic>` | joint states of topics no arm of the rig reads | per message |
-//! | `pose/<arm>/<x\|y\|z\|roll\|pitch\|yaw\|gripper>` | two series, `state` and `action` | per frame |
+//! | `pose/<arm>/<x\|y\|z\|roll\|pitch\|yaw\|gripper>` | two series, `state` and `action` (TCP space) | per frame |
+//! | `joint_space/<arm>/<joint\|gripper>` | two series, `state` and `action` (joint space) | per frame |
 //! | `world/<arm>` | the arm's base (arms side by side, 0.8 m apart) | static |
 //! | `world/<arm>/chain` | the kinematic chain through the joint origins | per frame |
 //! | `world/<arm>/links/<k>`, `world/<arm>/tcp` | link frames and the TCP (the pose in `state`) | per frame |
@@ -56,6 +57,7 @@ mod recording;
 mod runs;
 mod session;
 mod sink;
+mod space;
 mod ticks;
 
 pub use error::{Error, Result};

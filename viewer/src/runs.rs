@@ -6,14 +6,16 @@ use std::path::PathBuf;
 
 use rerun::{Scalars, SeriesLines, TextLog};
 use scaledp_schema::rig::Rig;
+use scaledp_schema::ActionSpace;
 
-use crate::arm::{xyz_strip, ArmModel};
+use crate::arm::ArmModel;
 use crate::error::{Error, Result};
 use crate::images::{raw_frame, Frame};
 use crate::layout;
 use crate::live::{now_ns, Own};
 #[allow(unused_imports)] // for the docs' links
 use crate::sink::Target;
+use crate::space::Dims;
 
 /// A training run's curves on a `step` timeline (for `scaledp train --view`).
 ///
@@ -77,11 +79,14 @@ pub struct RolloutView {
     own: Own,
     rig: Rig,
     arms: Vec<Option<ArmModel>>,
+    dims: Dims,
 }
 
 impl RolloutView {
-    /// Opens a recording named `name` for rollouts of `rig` at `target`.
-    pub fn start(target: &Target, name: &str, rig: &Rig) -> Result<Self> {
+    /// Opens a recording named `name` for rollouts of `rig` at `target`, its state and action
+    /// in `space`.
+    pub fn start(target: &Target, name: &str, rig: &Rig, space: ActionSpace) -> Result<Self> {
+        let dims = Dims::new(rig, space);
         let own = Own::open(target, &format!("rollout-{name}-{}", now_ns()), name)?;
         let arms: Vec<Option<ArmModel>> = rig.arms.iter().map(|a| ArmModel::new(a).ok()).collect();
         let r = Error::rerun;
@@ -92,9 +97,9 @@ impl RolloutView {
             if let Some(m) = m {
                 m.log_static(rec, i, arms.len())?;
             }
-            for d in layout::POSE_DIMS {
+            for d in &dims.arms[i].labels {
                 rec.log_static(
-                    layout::pose(&rig.arms[i].name, d),
+                    layout::state_action(space, &rig.arms[i].name, d),
                     &SeriesLines::new().with_names(["state", "action"]),
                 )
                 .map_err(r)?;
@@ -104,6 +109,7 @@ impl RolloutView {
             own,
             rig: rig.clone(),
             arms,
+            dims,
         })
     }
 
@@ -130,17 +136,20 @@ impl RolloutView {
             .map_err(Error::rerun)
     }
 
-    /// The state and the action executed (7 per arm, rig order, like a dataset's), and the
-    /// joint positions (rig order, arm joints only) when known, for the 3-D arms.
+    /// The state and the action executed (per arm, rig order, in the view's space, like a
+    /// dataset's), and the joint positions (rig order, arm joints only) when known, for the
+    /// 3-D arms.
     pub fn log_step(&self, state: &[f32], action: &[f32], joints: Option<&[f64]>) -> Result<()> {
         let r = Error::rerun;
         let rec = self.own.rec()?;
         let mut offset = 0;
         for (i, arm) in self.rig.arms.iter().enumerate() {
-            for (d, dim) in layout::POSE_DIMS.iter().enumerate() {
-                let v = |x: &[f32]| x.get(i * 7 + d).map_or(f64::NAN, |&v| f64::from(v));
+            let a = &self.dims.arms[i];
+            for (d, dim) in a.labels.iter().enumerate() {
+                let k = a.range.start + d;
+                let v = |x: &[f32]| x.get(k).map_or(f64::NAN, |&v| f64::from(v));
                 rec.log(
-                    layout::pose(&arm.name, dim),
+                    layout::state_action(self.dims.space, &arm.name, dim),
                     &Scalars::new([v(state), v(action)]),
                 )
                 .map_err(r)?;
@@ -157,15 +166,15 @@ impl RolloutView {
         Ok(())
     }
 
-    /// A predicted chunk: `dim` values per step (7 per arm, rig order), drawn per arm as a line
-    /// strip through its positions.
+    /// A predicted chunk: `dim` values per step (per arm, rig order, in the view's space),
+    /// drawn per arm as a line strip through its TCP positions.
     pub fn log_chunk(&self, predicted: &[f32], dim: usize) -> Result<()> {
         if dim == 0 {
             return Ok(());
         }
         let rows: Vec<Vec<f32>> = predicted.chunks(dim).map(<[f32]>::to_vec).collect();
         for (i, arm) in self.rig.arms.iter().enumerate() {
-            let strip = xyz_strip(&rows, 7 * i);
+            let strip = self.dims.tcp_strip(&rows, i);
             self.own
                 .rec()?
                 .log(

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use rerun::RecordingStream;
 use scaledp_converter::ConvertOptions;
 use scaledp_schema::rig::Rig;
+use scaledp_schema::ActionSpace;
 
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
@@ -25,6 +26,7 @@ pub struct ViewOptions {
     rig: Option<Rig>,
     chunk: usize,
     predictions: BTreeMap<u64, Prediction>,
+    action_space: ActionSpace,
 }
 
 impl Default for ViewOptions {
@@ -35,6 +37,7 @@ impl Default for ViewOptions {
             rig: None,
             chunk: 16,
             predictions: BTreeMap::new(),
+            action_space: ActionSpace::Tcp,
         }
     }
 }
@@ -99,6 +102,13 @@ impl ViewOptions {
     /// per arm beside the recorded chunk.
     pub fn prediction(mut self, episode: u64, prediction: Prediction) -> Self {
         self.predictions.insert(episode, prediction);
+        self
+    }
+
+    /// The space recordings are shown in, as `scaledp convert --action` would convert them
+    /// (default TCP poses; a dataset is shown in its own).
+    pub fn action_space(mut self, space: ActionSpace) -> Self {
+        self.action_space = space;
         self
     }
 
@@ -286,7 +296,7 @@ impl Viewer {
             }
         };
         let mut warnings = recording::warnings(&collected);
-        let mut convert = viewing_options();
+        let mut convert = viewing_options().action_space(self.opts.action_space);
         if let Some(r) = self.opts.rig.clone().or(rig) {
             convert = convert.rig(r);
         }

@@ -175,6 +175,7 @@ fn rows(ep: &Episode) -> Rows {
         joint_names: ep.joint_names.clone(),
         plot_joints: false,
         predicted: Vec::new(),
+        space: ep.action_space,
     }
 }
 
@@ -259,6 +260,12 @@ pub(crate) fn show_episode(
     let shape = layout::Shape {
         cameras: c.frames_logged.keys().cloned().collect(),
         arms: rig.arms.iter().map(|a| a.name.clone()).collect(),
+        dims: rig
+            .arms
+            .iter()
+            .map(|a| crate::space::labels(a, opts.action_space))
+            .collect(),
+        space: opts.action_space,
         topics: Vec::new(),
         quality: true,
         timeline: layout::CAPTURE_TIME,

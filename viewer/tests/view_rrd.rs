@@ -626,7 +626,13 @@ fn live_views_write_what_they_are_given() {
     // A rollout: an image, state and action, a predicted chunk.
     let rig = small_franka();
     let out = dir.path().join("rollout.rrd");
-    let roll = RolloutView::start(&Target::Save(out.clone()), "eval 0", &rig).unwrap();
+    let roll = RolloutView::start(
+        &Target::Save(out.clone()),
+        "eval 0",
+        &rig,
+        scaledp_schema::ActionSpace::Tcp,
+    )
+    .unwrap();
     roll.set_time(0, 0.0);
     roll.log_image("front", &[128u8; 8 * 6 * 3], 8, 6).unwrap();
     let state: Vec<f32> = (0..7).map(|i| i as f32 * 0.1).collect();

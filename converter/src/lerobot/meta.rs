@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use scaledp_schema::ActionSpace;
 use serde::{Deserialize, Serialize};
 
 use super::columns::{self as col, stage, stage_parquet, Staged};
@@ -72,6 +73,9 @@ pub struct Sidecar {
     pub cameras: Vec<String>,
     /// Names of state / action dimensions.
     pub state_names: Vec<String>,
+    /// Their space (absent in datasets written before joint space: TCP poses).
+    #[serde(default)]
+    pub action_space: ActionSpace,
     /// Names of joint dimensions.
     pub joint_names: Vec<String>,
     /// Task strings by task index.
@@ -219,7 +223,8 @@ pub fn stage_all(
             "image_size": [s.image_size.0, s.image_size.1],
             "jpeg_quality": s.jpeg_quality,
             "video": s.video,
-            "action": "absolute end-effector pose of the next tick (the last tick of each episode is dropped): per arm in rig order x, y, z (m), roll, pitch, yaw (rad, ROS R = Rz(yaw)·Ry(pitch)·Rx(roll), unwrapped along the episode), gripper opening (m); observation.state is the same at the current tick",
+            "action_space": s.action_space.name(),
+            "action": s.action_space.describe(),
             "kinematics": "built-in DH models (fr3/panda: modified DH, pose of the Franka Hand TCP — flange + 0.1034 m along z, −45° about z — in fr3_link0; ur5/ur5e: standard DH, pose of tool0 in the DH base frame) unless the rig names a URDF chain or a TCP offset",
             "time_alignment": "ticks at fps on header.stamp capture times, starting a quarter frame period after the latest camera's first frame so synchronised cameras pick the same capture; latest camera frame at or before each tick; joints linearly interpolated",
             "sources": s.episodes.iter().map(|e| serde_json::json!({"episode_index": e.episode_index, "source": e.source, "blake3": e.source_hash})).collect::<Vec<_>>(),

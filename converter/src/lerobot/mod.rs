@@ -154,6 +154,11 @@ impl Dataset {
         let cams: Vec<String> = ep.cameras.iter().map(|c| c.name.clone()).collect();
         let mismatch = if s.cameras != cams {
             Some(format!("cameras {cams:?}, the dataset has {:?}", s.cameras))
+        } else if s.action_space != ep.action_space {
+            Some(format!(
+                "{} state and action, the dataset's are {} (convert with --action {})",
+                ep.action_space, s.action_space, s.action_space
+            ))
         } else if s.state_names != ep.state_names {
             Some(format!(
                 "state {:?}, the dataset has {:?}",
@@ -256,6 +261,7 @@ impl Dataset {
                 video: ep.video.as_ref().map(VideoFormat::of),
                 cameras: ep.cameras.iter().map(|c| c.name.clone()).collect(),
                 state_names: ep.state_names.clone(),
+                action_space: ep.action_space,
                 joint_names: ep.joint_names.clone(),
                 tasks: vec![],
                 episodes: vec![],
@@ -344,6 +350,7 @@ impl Dataset {
             Some(s)
                 if s.cameras != o.cameras
                     || s.state_names != o.state_names
+                    || s.action_space != o.action_space
                     || s.joint_names != o.joint_names
                     || s.image_size != o.image_size
                     || s.jpeg_quality != o.jpeg_quality

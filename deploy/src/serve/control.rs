@@ -261,11 +261,9 @@ fn publish(ctl: &Controller, out: &mut Outputs, cmds: &[Command], stamp: u64) {
                 tracing::warn!("{}: {e}", p.key_expr());
             }
         };
-        if let Some(p) = pose_pub {
-            put(
-                p,
-                messages::pose_command(arm, &c.base_from_tcp, stamp).to_cdr(),
-            );
+        let m = messages::arm_command_cdr(arm, &scaledp_sim::ArmCommand::from(c), stamp);
+        if let (Some(p), Some(m)) = (pose_pub, m) {
+            put(p, m);
         }
         if let (Some(p), Some(g), Some(w)) = (grip_pub, &arm.gripper, c.gripper_width_m) {
             put(p, messages::gripper_command(g, w, stamp).to_cdr());

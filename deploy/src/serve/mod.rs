@@ -4,9 +4,11 @@
 //! `<domain>/<topic>/<type>/<hash>`), ticks at the checkpoint's control rate on the wall clock,
 //! runs inference on its own thread (the next chunk is computed while the current one is
 //! executed: the controller asks for it `lead` ticks early, `lead` being the measured median
-//! latency in ticks), and publishes per arm a `geometry_msgs/msg/PoseStamped` TCP target on the
-//! arm's `command_topic` and a `sensor_msgs/msg/JointState` gripper target on the gripper's
-//! `command_topic`, as the simulator and the scripted teleoperator speak them.
+//! latency in ticks), and publishes per arm what its `command_topic` takes (a
+//! `geometry_msgs/msg/PoseStamped` TCP target, or a leader arm's `sensor_msgs/msg/JointState`
+//! of joint targets, whichever space the checkpoint acts in) and a `sensor_msgs/msg/JointState`
+//! gripper target on the gripper's `command_topic`, as the simulators and the scripted
+//! teleoperator speak them.
 //!
 //! Header stamps and the tick are compared on one clock: the rig's clocks must be synchronized
 //! with this machine's (PTP / chrony), as they must be for recording.
@@ -251,7 +253,7 @@ impl Server {
             let pose = arm
                 .command_topic
                 .as_ref()
-                .map(|t| declare(key(t, "geometry_msgs/msg/PoseStamped")))
+                .map(|t| declare(key(t, arm.command_type.unwrap_or_default().message_type())))
                 .transpose()?;
             let grip = arm
                 .gripper

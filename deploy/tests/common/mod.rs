@@ -10,7 +10,7 @@ use scaledp_policy::model::ScaleDp;
 use scaledp_policy::{
     CheckpointConfig, DiffusionConfig, ModelConfig, ModelSize, Normalization, NormalizerConfig,
 };
-use scaledp_schema::Rig;
+use scaledp_schema::{ActionSpace, Rig};
 use scaledp_sim::Scene;
 
 /// `franka_sim` made light for a 2-core machine: 80×45 cameras, a 250 Hz arm.
@@ -53,6 +53,8 @@ pub struct Spec {
     pub centre: Vec<f64>,
     /// See `centre`.
     pub spread: f64,
+    /// The space of the state and action.
+    pub space: ActionSpace,
 }
 
 impl Spec {
@@ -66,9 +68,10 @@ impl Spec {
                 .map(|c| format!("observation.images.{}", c.name))
                 .collect(),
             dim: 7 * rig.arms.len(),
-            names: scaledp_converter::state_names(rig),
+            names: scaledp_converter::state_names(rig, ActionSpace::Tcp),
             centre: home_action(rig),
             spread: 100.0,
+            space: ActionSpace::Tcp,
         }
     }
 }
@@ -118,6 +121,7 @@ pub fn write(root: &Path, spec: &Spec) -> PathBuf {
         },
         state_names: names.clone(),
         action_names: names,
+        action_space: spec.space,
         fps: 10.0,
         robot_type: None,
         rig: spec.rig.clone(),

@@ -24,6 +24,8 @@ struct Provenance {
     robot_type: Option<String>,
     /// `scaledp.rig`.
     rig: Option<String>,
+    /// `scaledp.action_space` (TCP poses when absent).
+    action_space: scaledp_schema::ActionSpace,
     /// `scaledp.image_size` and `scaledp.jpeg_quality`: written by our converter.
     converted: Option<((u32, u32), Option<u8>)>,
     /// Each camera's stored (width, height) from its feature shape.
@@ -67,6 +69,10 @@ fn provenance(dataset: &str) -> Provenance {
     Provenance {
         robot_type: s(v.get("robot_type")),
         rig: s(sd.and_then(|x| x.get("rig"))),
+        action_space: sd
+            .and_then(|x| x.get("action_space"))
+            .and_then(|x| serde_json::from_value(x.clone()).ok())
+            .unwrap_or_default(),
         converted: size.map(|s| (s, quality)),
         stored,
     }
@@ -138,7 +144,10 @@ pub(super) fn config_for(
     let prov = provenance(dataset);
     let images = (!model.cameras.is_empty()).then(|| image_chain(&prov, &model));
     let Provenance {
-        robot_type, rig, ..
+        robot_type,
+        rig,
+        action_space,
+        ..
     } = prov;
     let n = loader.normalizer();
     Ok(CheckpointConfig {
@@ -152,6 +161,7 @@ pub(super) fn config_for(
         },
         state_names: info.state_names.clone(),
         action_names: info.action_names.clone(),
+        action_space,
         fps: info.fps,
         robot_type,
         rig,

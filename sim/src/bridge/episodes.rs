@@ -6,7 +6,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use scaledp_recorder::keys::{bridge_key, rmw_key, RmwAttachment};
 use scaledp_recorder::now_ns;
-use scaledp_schema::rig::CommandType;
 use scaledp_schema::{Rig, RosMessage};
 use zenoh::pubsub::Publisher;
 use zenoh::qos::CongestionControl;
@@ -156,23 +155,11 @@ impl Publishers {
     /// rig has command topics.
     pub fn commands(&mut self, commands: &[ArmCommand], stamp_ns: u64) -> Result<()> {
         for (i, (arm, c)) in self.rig.arms.iter().zip(commands).enumerate() {
-            if let Some(t) = self.poses[i].as_mut() {
-                match (arm.command_type.unwrap_or_default(), &c.joints, c.pose) {
-                    (CommandType::JointState, Some(q), _) => {
-                        t.put(messages::joint_state_of(arm, q, stamp_ns).to_cdr())?;
-                    }
-                    (CommandType::PoseStamped, _, Some(pose)) => {
-                        t.put(messages::pose_command(arm, &pose, stamp_ns).to_cdr())?;
-                    }
-                    (CommandType::PoseStamped, Some(q), None) => {
-                        let tcp = crate::scene::flange_from_tcp(arm);
-                        if let Ok(flange) = arm.model.base_from_flange(q) {
-                            let pose = flange * tcp;
-                            t.put(messages::pose_command(arm, &pose, stamp_ns).to_cdr())?;
-                        }
-                    }
-                    _ => {}
-                }
+            if let (Some(t), Some(m)) = (
+                self.poses[i].as_mut(),
+                messages::arm_command_cdr(arm, c, stamp_ns),
+            ) {
+                t.put(m)?;
             }
             let g = arm.gripper.as_ref();
             if let (Some(g), Some(w), Some(t)) =

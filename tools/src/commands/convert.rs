@@ -36,6 +36,7 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
         .max_invalid_fraction(args.max_invalid)
         .use_log_time(args.log_time)
         .reorder_window(args.reorder_window)
+        .action_space(args.action_space)
         .video(args.video.map(|v| match v {
             VideoArg::Av1 => VideoCodec::Av1,
             VideoArg::H264 => VideoCodec::H264,

@@ -22,6 +22,7 @@ pub fn run(args: ViewArgs) -> Result<ExitStatus> {
         .max_width(args.max_width)
         .episodes(args.episode.clone())
         .rig(rig)
+        .action_space(args.action_space)
         .chunk(args.chunk);
     if let Some(ckpt) = &args.checkpoint {
         for (episode, p) in predictions(ckpt, &args)? {
