@@ -27,6 +27,10 @@ pub enum Benchmark {
     /// metaworld/<task> --successes N`), converted, every arm trained and scored on the test
     /// seeds, the controls beside them; the table by difficulty level.
     Metaworld,
+    /// ALOHA's bimanual tasks (transfer-cube, insertion): per task, 50 demonstrations by the
+    /// ACT paper's scripted experts, converted with joint-space actions (what ALOHA's leader
+    /// arms command), every arm trained and scored on the test seeds, the controls beside them.
+    Aloha,
 }
 
 /// `scaledp experiment compare`.
@@ -39,13 +43,14 @@ pub struct CompareArgs {
     /// Run a simulation benchmark's tasks instead of one dataset (--tasks).
     #[arg(long, value_enum, conflicts_with = "dataset")]
     pub benchmark: Option<Benchmark>,
-    /// The benchmark's tasks, comma-separated (MetaWorld task names), each run to the end
-    /// (every arm) before the next.
+    /// The benchmark's tasks, comma-separated (MetaWorld task names; ALOHA's transfer-cube,
+    /// insertion), each run to the end (every arm) before the next.
     #[arg(long, value_delimiter = ',', requires = "benchmark")]
     pub tasks: Vec<String>,
-    /// Successful demonstrations per task (the paper: 20).
-    #[arg(long, default_value_t = 20)]
-    pub demos: u64,
+    /// Successful demonstrations per task [MetaWorld: 20, as the paper; ALOHA: 50, as the ACT
+    /// paper].
+    #[arg(long)]
+    pub demos: Option<u64>,
     /// Episodes of each control of a benchmark task (untrained weights and frozen cameras of
     /// the first arm; the scripted expert always runs on every test seed).
     #[arg(long, default_value_t = 20)]
@@ -58,7 +63,8 @@ pub struct CompareArgs {
     /// other [ti,ti-causal,s; a benchmark: ti,dp-t].
     #[arg(long, value_delimiter = ',')]
     pub arms: Vec<String>,
-    /// The training recipe every arm uses [cpu-sim; MetaWorld: cpu-metaworld].
+    /// The training recipe every arm uses [cpu-sim; MetaWorld: cpu-metaworld; ALOHA:
+    /// cpu-aloha].
     #[arg(long)]
     pub preset: Option<String>,
     /// Optimizer steps instead of the preset's.

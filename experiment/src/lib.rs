@@ -80,7 +80,7 @@ impl Settings {
             name: a
                 .name
                 .clone()
-                .unwrap_or_else(|| if bench { "metaworld" } else { "cpu-sim" }.into()),
+                .unwrap_or_else(|| a.benchmark.map_or("cpu-sim", |b| b.name()).into()),
             arms: arms
                 .iter()
                 .map(|n| {
@@ -90,7 +90,7 @@ impl Settings {
             preset: a
                 .preset
                 .clone()
-                .unwrap_or_else(|| if bench { "cpu-metaworld" } else { "cpu-sim" }.into()),
+                .unwrap_or_else(|| a.benchmark.map_or("cpu-sim", |b| b.preset()).into()),
             val_episodes: a.val_episodes.unwrap_or(if bench { 0 } else { 20 }),
             live_episodes: a.live_episodes.unwrap_or(if bench { 0 } else { 20 }),
         })

@@ -1,12 +1,13 @@
-//! `scaledp experiment compare --benchmark metaworld --tasks …`: the comparison on a simulation
-//! benchmark, task by task. Per task: `--demos` successful demonstrations by the simulator's
-//! scripted expert (`scaledp collect --rig metaworld/<task> --successes N`, seeds from 0),
-//! converted at the rig's image size; every arm trained with the one recipe, its last
+//! `scaledp experiment compare --benchmark metaworld|aloha --tasks …`: the comparison on a
+//! simulation benchmark, task by task. Per task: `--demos` successful demonstrations by the
+//! simulator's scripted expert (`scaledp collect --rig <benchmark>/<task> --successes N`, seeds
+//! from 0), converted at the rig's image size in the benchmark's action space; every arm trained with the one recipe, its last
 //! checkpoint scored on the test seeds; the controls beside it (the scripted expert on the same
 //! seeds, the first arm's untrained weights and its cameras frozen). Each (task, arm) resumes
 //! where it stopped and lands its JSON as it finishes; the table (by difficulty level) and the
 //! plot are rebuilt from the files that are there.
 
+mod kind;
 mod report;
 
 use std::path::{Path, PathBuf};
@@ -17,8 +18,7 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use scaledp_deploy::Split;
 use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
-use scaledp_schema::benchmarks::metaworld_difficulty;
-use scaledp_schema::Rig;
+use scaledp_schema::{ActionSpace, Rig};
 use serde::{Deserialize, Serialize};
 
 pub(crate) use report::{is_benchmark, rebuild};
@@ -26,16 +26,16 @@ pub(crate) use report::{is_benchmark, rebuild};
 use crate::arms::Arm;
 use crate::evaluate::{self, EvalPlan, Kind};
 use crate::results::{self, Controls, EvalFigures, Provenance};
-use crate::{train, CompareArgs, Settings};
+use crate::{train, Benchmark, CompareArgs, Settings};
 
 /// One (task, arm) result: `RESULTS/NAME/<task>--<arm>.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TaskResult {
-    /// `metaworld`.
+    /// `metaworld`, `aloha`.
     pub benchmark: String,
     /// The task (`assembly`).
     pub task: String,
-    /// Its difficulty level (`easy`, `medium`, `hard`, `very hard`).
+    /// Its level (MetaWorld's `easy`, `medium`, `hard`, `very hard`; ALOHA's `bimanual`).
     pub level: String,
     /// The arm (`ti`, `dp-t`).
     pub arm: String,
@@ -128,9 +128,9 @@ fn scaledp(args: &[&str]) -> Result<()> {
     Ok(())
 }
 
-/// The task's dataset: `demos` successful demonstrations collected and converted (whatever of
-/// that is already there is kept).
-fn prepare(rig: &Rig, dir: &Path, demos: u64) -> Result<(PathBuf, u64)> {
+/// The task's dataset: `demos` successful demonstrations collected and converted in `space`
+/// (whatever of that is already there is kept).
+fn prepare(rig: &Rig, dir: &Path, demos: u64, space: ActionSpace) -> Result<(PathBuf, u64)> {
     let ds = dir.join("dataset");
     let rec = dir.join("demos");
     let (mut ok, next) = collected(&rec);
@@ -161,7 +161,16 @@ fn prepare(rig: &Rig, dir: &Path, demos: u64) -> Result<(PathBuf, u64)> {
     let partial = dir.join("dataset.partial");
     let _ = std::fs::remove_dir_all(&partial);
     let (src, dst) = (rec.display().to_string(), partial.display().to_string());
-    scaledp(&["convert", &src, "--out", &dst, "--size", &size])?;
+    scaledp(&[
+        "convert",
+        &src,
+        "--out",
+        &dst,
+        "--size",
+        &size,
+        "--action",
+        space.name(),
+    ])?;
     std::fs::rename(&partial, &ds).with_context(|| format!("finishing {}", ds.display()))?;
     Ok((ds, ok))
 }
@@ -186,9 +195,16 @@ pub(crate) fn run(
     base: TrainOptions,
     stop: &Arc<AtomicBool>,
 ) -> Result<()> {
+    let Some(bench) = a.benchmark else {
+        bail!("no --benchmark");
+    };
     if a.tasks.is_empty() {
-        bail!("--benchmark metaworld needs --tasks (MetaWorld task names, comma-separated)");
+        bail!(
+            "--benchmark {} needs --tasks (comma-separated)",
+            bench.name()
+        );
     }
+    let demos = a.demos.unwrap_or(bench.demos());
     let results_dir = a.results.join(&st.name);
     std::fs::create_dir_all(&results_dir)
         .with_context(|| format!("creating {}", results_dir.display()))?;
@@ -197,12 +213,11 @@ pub(crate) fn run(
         action_steps: a.action_steps,
     };
     for task in &a.tasks {
-        let level = metaworld_difficulty(task)
-            .with_context(|| format!("--tasks {task}: not one of MetaWorld's 50 tasks"))?;
-        let rig = Rig::load_or_builtin(&format!("metaworld/{task}"))?;
+        let level = bench.level(task)?;
+        let rig = Rig::load_or_builtin(&bench.rig(task))?;
         let task_dir = a.runs.join(&st.name).join(task);
-        eprintln!("== task {task} ({})", level.label());
-        let (dataset, demos) = prepare(&rig, &task_dir, a.demos)?;
+        eprintln!("== task {task} ({level})");
+        let (dataset, demos) = prepare(&rig, &task_dir, demos, bench.action_space())?;
         let dataset = dataset.display().to_string();
         for &arm in &st.arms {
             let path = result_path(&results_dir, task, arm.name);
@@ -237,9 +252,9 @@ pub(crate) fn run(
             let times = train::step_times(&run)?;
             let figures = EvalFigures::of(&test);
             let result = TaskResult {
-                benchmark: "metaworld".into(),
+                benchmark: bench.name().into(),
                 task: task.clone(),
-                level: level.label().into(),
+                level: level.into(),
                 arm: arm.name.into(),
                 what: arm.what.into(),
                 test_success_rate: figures.success_rate,
@@ -254,7 +269,7 @@ pub(crate) fn run(
                 denoiser_params: counts.denoiser,
                 encoder_params: counts.encoders,
                 demonstrations: demos,
-                command: command(a, st, task, arm),
+                command: command(a, st, bench, task, arm),
                 train_command: crate::train_command(&dataset, &st.preset, arm, &opts, &run),
                 train_options: serde_json::to_value(&opts)?,
                 train_revision: revision,
@@ -275,16 +290,7 @@ pub(crate) fn run(
         }
         if !a.no_controls {
             if let Some(&first) = st.arms.first() {
-                controls(
-                    a,
-                    &rig,
-                    task,
-                    level.label(),
-                    first,
-                    &task_dir,
-                    &results_dir,
-                    &plan,
-                )?;
+                controls(a, &rig, task, level, first, &task_dir, &results_dir, &plan)?;
             }
         }
     }
@@ -341,9 +347,9 @@ fn provenance() -> Provenance {
 }
 
 /// The command line that reproduces one (task, arm).
-fn command(a: &CompareArgs, st: &Settings, task: &str, arm: Arm) -> String {
+fn command(a: &CompareArgs, st: &Settings, bench: Benchmark, task: &str, arm: Arm) -> String {
     format!(
-        "scaledp experiment compare --benchmark metaworld --tasks {task} --arms {} --name {} --preset {} --demos {} --test-episodes {} --controls-episodes {} --max-seconds {} --action-steps {}",
-        arm.name, st.name, st.preset, a.demos, a.test_episodes, a.controls_episodes, a.max_seconds, a.action_steps
+        "scaledp experiment compare --benchmark {} --tasks {task} --arms {} --name {} --preset {} --demos {} --test-episodes {} --controls-episodes {} --max-seconds {} --action-steps {}",
+        bench.name(), arm.name, st.name, st.preset, a.demos.unwrap_or(bench.demos()), a.test_episodes, a.controls_episodes, a.max_seconds, a.action_steps
     )
 }

@@ -1,6 +1,7 @@
 //! A benchmark's table (`table.md`: per task and arm the test success with its interval, the
-//! controls, and per difficulty level the mean over its tasks) and plot
-//! (`success_by_level.svg`), rebuilt from the (task, arm) files in the results directory.
+//! controls, and per level the mean over its tasks) and plot (`success_by_level.svg`: per
+//! level, or per task when the benchmark has one level, as ALOHA), rebuilt from the (task, arm)
+//! files in the results directory.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -55,11 +56,23 @@ fn load(dir: &Path) -> Result<Loaded> {
     Ok(Loaded { results, controls })
 }
 
-fn level_of(label: &str) -> Difficulty {
-    Difficulty::ALL
-        .into_iter()
-        .find(|d| d.label() == label)
-        .unwrap_or(Difficulty::Easy)
+/// A task's level: MetaWorld's difficulty levels in their order, any other label (ALOHA's
+/// `bimanual`) after them.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+struct Level {
+    rank: usize,
+    label: String,
+}
+
+fn level_of(label: &str) -> Level {
+    let rank = Difficulty::ALL
+        .iter()
+        .position(|d| d.label() == label)
+        .unwrap_or(Difficulty::ALL.len());
+    Level {
+        rank,
+        label: label.to_string(),
+    }
 }
 
 /// The arms present, in the arms' order.
@@ -88,7 +101,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         bail!("{}: no task results yet", dir.display());
     }
     let arms = arms_of(&l.results);
-    let mut tasks: Vec<(Difficulty, String)> = l
+    let mut tasks: Vec<(Level, String)> = l
         .results
         .iter()
         .map(|r| (level_of(&r.level), r.task.clone()))
@@ -109,7 +122,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     md.push_str(&"---|".repeat(arms.len() + 3));
     md.push('\n');
     for (level, task) in &tasks {
-        md.push_str(&format!("| {} | {task} |", level.label()));
+        md.push_str(&format!("| {} | {task} |", level.label));
         for a in &arms {
             md.push_str(&format!(
                 " {} |",
@@ -137,7 +150,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     md.push('\n');
     for (level, means) in level_means(&tasks, &arms, &get) {
         let (n, values) = means;
-        md.push_str(&format!("| {} | {n} |", level.label()));
+        md.push_str(&format!("| {} | {n} |", level.label));
         for v in values {
             md.push_str(&format!(" {:.1} % |", 100.0 * v));
         }
@@ -174,7 +187,14 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     }
     std::fs::write(dir.join("table.md"), md)
         .with_context(|| format!("writing {}/table.md", dir.display()))?;
-    plot(&tasks, &arms, &get, &dir.join("success_by_level.svg"))?;
+    let title = l.results[0].benchmark.as_str();
+    plot(
+        title,
+        &tasks,
+        &arms,
+        &get,
+        &dir.join("success_by_level.svg"),
+    )?;
     eprintln!(
         "rebuilt {}/table.md and success_by_level.svg",
         dir.display()
@@ -192,19 +212,21 @@ fn short(rev: &str) -> String {
     })
 }
 
-type Means = Vec<(Difficulty, (usize, Vec<f64>))>;
+type Means = Vec<(Level, (usize, Vec<f64>))>;
 
 /// Per level: the tasks where every arm has a result, and each arm's mean over them.
 fn level_means<'a>(
-    tasks: &[(Difficulty, String)],
+    tasks: &[(Level, String)],
     arms: &[&str],
     get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
 ) -> Means {
+    let mut levels: Vec<&Level> = tasks.iter().map(|(l, _)| l).collect();
+    levels.dedup();
     let mut out = Vec::new();
-    for level in Difficulty::ALL {
+    for level in levels {
         let full: Vec<&String> = tasks
             .iter()
-            .filter(|(l, t)| *l == level && arms.iter().all(|a| get(t, a).is_some()))
+            .filter(|(l, t)| l == level && arms.iter().all(|a| get(t, a).is_some()))
             .map(|(_, t)| t)
             .collect();
         if full.is_empty() {
@@ -220,9 +242,18 @@ fn level_means<'a>(
                     / full.len() as f64
             })
             .collect();
-        out.push((level, (full.len(), means)));
+        out.push((level.clone(), (full.len(), means)));
     }
     out
+}
+
+/// `MetaWorld`, `ALOHA` (else the name as it is).
+fn display_name(benchmark: &str) -> &str {
+    match benchmark {
+        "metaworld" => "MetaWorld",
+        "aloha" => "ALOHA",
+        other => other,
+    }
 }
 
 const COLOURS: [RGBColor; 4] = [
@@ -232,21 +263,36 @@ const COLOURS: [RGBColor; 4] = [
     RGBColor(148, 103, 189),
 ];
 
-/// Grouped bars: per level, each arm's mean test success.
+/// Grouped bars: per level (or per task, when every task has the same level), each arm's mean
+/// test success.
 fn plot<'a>(
-    tasks: &[(Difficulty, String)],
+    benchmark: &str,
+    tasks: &[(Level, String)],
     arms: &[&str],
     get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
     path: &Path,
 ) -> Result<()> {
-    let means = level_means(tasks, arms, get);
+    let by_task = tasks.iter().all(|(l, _)| *l == tasks[0].0);
+    let means: Means = if by_task {
+        let per_task: Vec<(Level, String)> = tasks
+            .iter()
+            .map(|(_, t)| (level_of(t), t.clone()))
+            .collect();
+        level_means(&per_task, arms, get)
+    } else {
+        level_means(tasks, arms, get)
+    };
     let err = |e: String| anyhow!("plot: {e}");
     let root = SVGBackend::new(path, (800, 460)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
     let groups = means.len().max(1) as f64;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "MetaWorld: test success by difficulty level",
+            format!(
+                "{}: test success by {}",
+                display_name(benchmark),
+                if by_task { "task" } else { "difficulty level" }
+            ),
             ("sans-serif", 20),
         )
         .margin(16)
@@ -256,7 +302,13 @@ fn plot<'a>(
         .map_err(|e| err(e.to_string()))?;
     let labels: Vec<String> = means
         .iter()
-        .map(|(l, (n, _))| format!("{} ({n} tasks)", l.label()))
+        .map(|(l, (n, _))| {
+            if by_task {
+                l.label.clone()
+            } else {
+                format!("{} ({n} tasks)", l.label)
+            }
+        })
         .collect();
     chart
         .configure_mesh()

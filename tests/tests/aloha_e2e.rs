@@ -1,0 +1,155 @@
+//! ALOHA through the whole stack at toy scale, through the `scaledp` binary: `experiment compare
+//! --benchmark aloha` collects two transfer-cube demonstrations with the ACT paper's scripted
+//! expert through the recorder, converts them with joint-space actions (14-D: six joints and a
+//! gripper per arm), trains ScaleDP-Ti one step, scores it on test seeds in simulated time,
+//! runs the controls and rebuilds the table and plot; the same recordings convert with 6D TCP
+//! actions too, and the checkpoint drives the puppets live through `serve`. Needs `.venv-sims`
+//! (`scripts/setup-sims.sh`, which `scripts/test.sh` runs).
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use scaledp_tests::{read_json, scaledp_bin};
+
+fn scaledp(args: &[&str], cwd: &Path) -> Output {
+    Command::new(scaledp_bin())
+        .args(args)
+        .current_dir(cwd)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap()
+}
+
+fn ok(out: &Output, what: &str) -> String {
+    assert!(
+        out.status.success(),
+        "{what}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+fn names(info: &serde_json::Value, feature: &str) -> Vec<String> {
+    info["features"][feature]["names"]
+        .as_array()
+        .unwrap_or_else(|| panic!("{feature} has no names: {info}"))
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let args = [
+        "experiment",
+        "compare",
+        "--benchmark",
+        "aloha",
+        "--tasks",
+        "transfer-cube",
+        "--arms",
+        "ti",
+        "--demos",
+        "2",
+        "--steps",
+        "1",
+        "--checkpoint-every",
+        "1",
+        "--batch-size",
+        "8",
+        "--test-episodes",
+        "2",
+        "--controls-episodes",
+        "1",
+        "--max-seconds",
+        "0.3",
+        "--runs",
+        "runs",
+        "--results",
+        "results",
+    ];
+    ok(
+        &scaledp(&args, root),
+        "experiment compare --benchmark aloha",
+    );
+    let task = root.join("runs/aloha/transfer-cube");
+
+    // The dataset is in joint space: per arm its six joints in rig order, then its gripper.
+    let info = read_json(&task.join("dataset/meta/info.json"));
+    assert_eq!(info["scaledp"]["action_space"], "joints", "{info}");
+    let state = names(&info, "observation.state");
+    assert_eq!(state.len(), 14, "{state:?}");
+    assert_eq!(state[0], "left_waist", "{state:?}");
+    assert_eq!(state[6], "left_gripper", "{state:?}");
+    assert_eq!(state[7], "right_waist", "{state:?}");
+    assert_eq!(names(&info, "action"), state);
+
+    let res = root.join("results/aloha");
+    let r = read_json(&res.join("transfer-cube--ti.json"));
+    assert_eq!(r["benchmark"], "aloha", "{r}");
+    assert_eq!(r["level"], "bimanual", "{r}");
+    assert_eq!(r["demonstrations"], 2, "{r}");
+    assert_eq!(r["steps"], 1, "{r}");
+    assert_eq!(r["test"]["episodes"], 2, "{r}");
+    assert!(r["simulator"]["gym-aloha"].is_string(), "{r}");
+    let c = read_json(&res.join("transfer-cube--controls.json"));
+    assert_eq!(c["controls"]["scripted_expert"]["episodes"], 2, "{c}");
+    assert_eq!(c["controls"]["untrained"]["episodes"], 1, "{c}");
+    let table = std::fs::read_to_string(res.join("table.md")).unwrap();
+    assert!(table.contains("| bimanual | transfer-cube |"), "{table}");
+    assert!(res.join("success_by_level.svg").exists());
+
+    // The same recordings in TCP space: 6D pose and gripper per arm.
+    let tcp = root.join("tcp");
+    ok(
+        &scaledp(
+            &[
+                "convert",
+                task.join("demos").to_str().unwrap(),
+                "--out",
+                tcp.to_str().unwrap(),
+                "--size",
+                "128x96",
+                "--action",
+                "tcp",
+            ],
+            root,
+        ),
+        "convert --action tcp",
+    );
+    let info = read_json(&tcp.join("meta/info.json"));
+    assert_eq!(info["scaledp"]["action_space"], "tcp", "{info}");
+    assert_eq!(names(&info, "action").len(), 14, "{info}");
+    assert_eq!(info["total_episodes"], 2, "{info}");
+
+    // The checkpoint live: the simulator on its own /clock, serve sending the leader joints
+    // (two simulated seconds: the first inference alone takes a few ticks at 50 Hz).
+    let report = root.join("live.json");
+    let live = ok(
+        &scaledp(
+            &[
+                "eval",
+                "runs/aloha/transfer-cube/ti",
+                "--live",
+                "--episodes",
+                "1",
+                "--split",
+                "val",
+                "--max-seconds",
+                "2",
+                "--report",
+                report.to_str().unwrap(),
+            ],
+            root,
+        ),
+        "eval --live",
+    );
+    let r = read_json(&report);
+    assert_eq!(r["mode"], "live", "{live}\n{r}");
+    let ep = &r["episodes"][0];
+    assert!(ep["commanded_ticks"].as_u64().unwrap() >= 5, "{r}");
+}
