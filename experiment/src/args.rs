@@ -101,9 +101,9 @@ pub struct CompareArgs {
     /// Longest evaluation episode (simulated s).
     #[arg(long, default_value_t = 30.0)]
     pub max_seconds: f64,
-    /// Actions executed per predicted chunk.
-    #[arg(long, default_value_t = 8)]
-    pub action_steps: usize,
+    /// Actions executed per predicted chunk [half the recipe's chunk: 8 of 16, ALOHA 16 of 32].
+    #[arg(long)]
+    pub action_steps: Option<usize>,
 }
 
 /// `scaledp experiment report`.

@@ -62,6 +62,8 @@ pub(crate) struct Settings {
     preset: String,
     val_episodes: u64,
     live_episodes: u64,
+    /// Actions executed per chunk in every evaluation.
+    action_steps: usize,
 }
 
 impl Settings {
@@ -76,6 +78,12 @@ impl Settings {
         } else {
             a.arms.clone()
         };
+        let preset = a
+            .preset
+            .clone()
+            .unwrap_or_else(|| a.benchmark.map_or("cpu-sim", |b| b.preset()).into());
+        // diffusion_policy's receding horizon: half the predicted chunk (8 of 16).
+        let chunk = TrainOptions::preset(&preset).map_or(16, |o| o.get_action_chunk());
         Ok(Settings {
             name: a
                 .name
@@ -87,12 +95,10 @@ impl Settings {
                     arms::arm(n).with_context(|| format!("--arms {n}: one of {}", arms::names()))
                 })
                 .collect::<Result<_>>()?,
-            preset: a
-                .preset
-                .clone()
-                .unwrap_or_else(|| a.benchmark.map_or("cpu-sim", |b| b.preset()).into()),
+            preset,
             val_episodes: a.val_episodes.unwrap_or(if bench { 0 } else { 20 }),
             live_episodes: a.live_episodes.unwrap_or(if bench { 0 } else { 20 }),
+            action_steps: a.action_steps.unwrap_or((chunk / 2).max(1)),
         })
     }
 }
@@ -125,7 +131,7 @@ fn recipe(a: &CompareArgs, s: &Settings) -> Result<TrainOptions> {
 fn command(a: &CompareArgs, st: &Settings, dataset: &str, arm: &str) -> String {
     let mut s = format!(
         "scaledp experiment compare --dataset {dataset} --name {} --arms {arm} --preset {} --val-episodes {} --test-episodes {} --live-episodes {} --max-seconds {} --action-steps {}",
-        st.name, st.preset, st.val_episodes, a.test_episodes, st.live_episodes, a.max_seconds, a.action_steps
+        st.name, st.preset, st.val_episodes, a.test_episodes, st.live_episodes, a.max_seconds, st.action_steps
     );
     for (flag, v) in [
         ("--steps", a.steps),
@@ -157,7 +163,7 @@ fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
     let base = recipe(a, &st)?;
     let plan = EvalPlan {
         max_seconds: a.max_seconds,
-        action_steps: a.action_steps,
+        action_steps: st.action_steps,
     };
     for &arm in &st.arms {
         eprintln!("== arm {}: {}", arm.name, arm.what);

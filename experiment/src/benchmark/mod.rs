@@ -210,7 +210,7 @@ pub(crate) fn run(
         .with_context(|| format!("creating {}", results_dir.display()))?;
     let plan = EvalPlan {
         max_seconds: a.max_seconds,
-        action_steps: a.action_steps,
+        action_steps: st.action_steps,
     };
     for task in &a.tasks {
         let level = bench.level(task)?;
@@ -350,6 +350,6 @@ fn provenance() -> Provenance {
 fn command(a: &CompareArgs, st: &Settings, bench: Benchmark, task: &str, arm: Arm) -> String {
     format!(
         "scaledp experiment compare --benchmark {} --tasks {task} --arms {} --name {} --preset {} --demos {} --test-episodes {} --controls-episodes {} --max-seconds {} --action-steps {}",
-        bench.name(), arm.name, st.name, st.preset, a.demos.unwrap_or(bench.demos()), a.test_episodes, a.controls_episodes, a.max_seconds, a.action_steps
+        bench.name(), arm.name, st.name, st.preset, a.demos.unwrap_or(bench.demos()), a.test_episodes, a.controls_episodes, a.max_seconds, st.action_steps
     )
 }

@@ -315,6 +315,10 @@ impl TrainOptions {
     pub fn get_seed(&self) -> u64 {
         self.seed
     }
+    /// Actions per predicted chunk.
+    pub fn get_action_chunk(&self) -> usize {
+        self.action_chunk
+    }
     /// Total steps.
     pub fn get_steps(&self) -> u64 {
         self.steps

@@ -123,7 +123,8 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
         settle_s: a.settle_s,
         control: scaledp_deploy::ControlOptions {
             freeze_cameras: a.freeze_cameras,
-            ..a.control.options(&rig)?
+            ..a.control
+                .options(&rig, policy.config().model.action_chunk)?
         },
         recordings: a.recordings.clone(),
     };

@@ -81,7 +81,9 @@ pub fn run(a: ServeArgs) -> Result<ExitStatus> {
         KeysArg::Rmw => scaledp_sim::KeyStyle::Rmw,
     };
     opts.namespace = a.namespace.clone();
-    opts.control = a.control.options(&rig)?;
+    opts.control = a
+        .control
+        .options(&rig, policy.config().model.action_chunk)?;
     opts.dry_run = a.dry_run;
     opts.status_key = a.status_key.clone();
     opts.seed = a.seed;

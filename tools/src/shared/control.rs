@@ -9,9 +9,10 @@ use scaledp_schema::Rig;
 /// The controller settings `serve` and `eval` share.
 #[derive(Debug, Clone, Args)]
 pub struct ControlArgs {
-    /// Actions executed per predicted chunk (receding horizon), 1 … the checkpoint's chunk.
-    #[arg(long, default_value_t = 8)]
-    pub action_steps: usize,
+    /// Actions executed per predicted chunk (receding horizon), 1 … the checkpoint's chunk
+    /// [half the checkpoint's chunk, as diffusion_policy: 8 of 16].
+    #[arg(long)]
+    pub action_steps: Option<usize>,
     /// Workspace box of the TCP targets in the arm's base frame, xmin,ymin,zmin,xmax,ymax,zmax
     /// (m): once for every arm, or once per arm in rig order (default: the simulated cell's
     /// work region of each arm, 12 cm wider, from 5 mm to 45 cm above the table).
@@ -41,8 +42,8 @@ pub struct ControlArgs {
 }
 
 impl ControlArgs {
-    /// The controller options for `rig`.
-    pub fn options(&self, rig: &Rig) -> Result<ControlOptions> {
+    /// The controller options for `rig` and a checkpoint predicting `chunk` actions at a time.
+    pub fn options(&self, rig: &Rig, chunk: usize) -> Result<ControlOptions> {
         let boxes = self
             .workspace
             .iter()
@@ -63,7 +64,7 @@ impl ControlArgs {
             ),
         };
         Ok(ControlOptions {
-            action_steps: self.action_steps,
+            action_steps: self.action_steps.unwrap_or((chunk / 2).max(1)),
             workspace,
             max_step_m: self.max_step_m,
             max_step_rad: self.max_step_rad,

@@ -32,7 +32,7 @@ PRESETS: Dict[str, Dict[str, Any]] = {
                       "val_ratio": 0.0, "val_every": 0, "image_size": [84, 84]},
     "cpu-aloha": {"resnet_width": 32, "noise_samples": 2, "batch_size": 64, "lr": 3e-4,
                   "warmup_steps": 500, "steps": 4000, "checkpoint_every": 1000,
-                  "val_ratio": 0.0, "val_every": 0, "image_size": [128, 96]},
+                  "val_ratio": 0.0, "val_every": 0, "image_size": [128, 96], "action_chunk": 32},
 }
 
 
