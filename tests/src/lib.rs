@@ -223,3 +223,48 @@ pub fn await_file(path: &std::path::Path, limit: std::time::Duration, what: &str
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
 }
+
+/// Runs the `scaledp` binary with `args` in `cwd`, its standard input closed.
+pub fn run_scaledp(args: &[&str], cwd: &Path) -> std::process::Output {
+    std::process::Command::new(scaledp_bin())
+        .args(args)
+        .current_dir(cwd)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap_or_else(|e| panic!("running {}: {e}", scaledp_bin().display()))
+}
+
+/// The standard output of `out`, which must have succeeded (else the test fails with `what`,
+/// its standard output and its standard error).
+pub fn cli_ok(out: &std::process::Output, what: &str) -> String {
+    assert!(
+        out.status.success(),
+        "{what}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
+/// One `scaledp eval --live` episode (validation split) of the run `run`, `seconds` long, from
+/// `cwd`: its report, checked to be a live one.
+pub fn live_episode(cwd: &Path, run: &str, seconds: &str) -> serde_json::Value {
+    let report = cwd.join("live.json");
+    let args = [
+        "eval",
+        run,
+        "--live",
+        "--episodes",
+        "1",
+        "--split",
+        "val",
+        "--max-seconds",
+        seconds,
+        "--report",
+        report.to_str().unwrap_or("live.json"),
+    ];
+    let out = cli_ok(&run_scaledp(&args, cwd), "eval --live");
+    let r = read_json(&report);
+    assert_eq!(r["mode"], "live", "{out}\n{r}");
+    r
+}

@@ -7,29 +7,7 @@
 //! (`scripts/setup-sims.sh`, which `scripts/test.sh` runs).
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-use scaledp_tests::{read_json, scaledp_bin};
-
-fn scaledp(args: &[&str], cwd: &Path) -> Output {
-    Command::new(scaledp_bin())
-        .args(args)
-        .current_dir(cwd)
-        .stdin(std::process::Stdio::null())
-        .output()
-        .unwrap()
-}
-
-fn ok(out: &Output, what: &str) -> String {
-    assert!(
-        out.status.success(),
-        "{what}: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).to_string()
-}
+use scaledp_tests::{cli_ok, live_episode, read_json, run_scaledp};
 
 fn names(info: &serde_json::Value, feature: &str) -> Vec<String> {
     info["features"][feature]["names"]
@@ -72,8 +50,8 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
         "--results",
         "results",
     ];
-    ok(
-        &scaledp(&args, root),
+    cli_ok(
+        &run_scaledp(&args, root),
         "experiment compare --benchmark aloha",
     );
     let task = root.join("runs/aloha/transfer-cube");
@@ -105,8 +83,8 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
 
     // The same recordings in TCP space: 6D pose and gripper per arm.
     let tcp = root.join("tcp");
-    ok(
-        &scaledp(
+    cli_ok(
+        &run_scaledp(
             &[
                 "convert",
                 task.join("demos").to_str().unwrap(),
@@ -128,28 +106,7 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
 
     // The checkpoint live: the simulator on its own /clock, serve sending the leader joints
     // (two simulated seconds: the first inference alone takes a few ticks at 50 Hz).
-    let report = root.join("live.json");
-    let live = ok(
-        &scaledp(
-            &[
-                "eval",
-                "runs/aloha/transfer-cube/ti",
-                "--live",
-                "--episodes",
-                "1",
-                "--split",
-                "val",
-                "--max-seconds",
-                "2",
-                "--report",
-                report.to_str().unwrap(),
-            ],
-            root,
-        ),
-        "eval --live",
-    );
-    let r = read_json(&report);
-    assert_eq!(r["mode"], "live", "{live}\n{r}");
+    let r = live_episode(root, "runs/aloha/transfer-cube/ti", "2");
     let ep = &r["episodes"][0];
     assert!(ep["commanded_ticks"].as_u64().unwrap() >= 5, "{r}");
 }

@@ -519,17 +519,7 @@ fn a_command_topic_gives_the_action_instead_of_the_next_tick() {
     // no longer the next tick's.
     let over = format!("{}_command={}", arm.name, arm.joint_state_topic);
     let (state, action) = run("cmd", &["--topic".as_ref(), over.as_ref()]);
-    let dist = |a: &[f32], b: &[f32]| (0..3).map(|d| (a[d] - b[d]).powi(2)).sum::<f32>().sqrt();
-    let (mut near_now, mut moving) = (0, 0);
-    for t in 0..state.len() - 1 {
-        let step = dist(&state[t], &state[t + 1]);
-        if step > 1e-3 {
-            moving += 1;
-            if dist(&action[t], &state[t]) < 0.25 * step {
-                near_now += 1;
-            }
-        }
-    }
+    let (near_now, moving) = follows_now(&state, &action, 3);
     assert!(moving > 5, "the arm hardly moves: {moving} moving ticks");
     assert_eq!(near_now, moving, "the command's pose, not the next tick's");
     // A command topic without messages is a clear error for that file.
@@ -645,7 +635,19 @@ fn a_leader_arms_joint_states_are_the_joint_space_action() {
         String::from_utf8_lossy(&out.stdout)
     );
     let (state, action) = (f32_rows(&ds, "observation.state"), f32_rows(&ds, "action"));
-    let dist = |a: &[f32], b: &[f32]| (0..7).map(|d| (a[d] - b[d]).powi(2)).sum::<f32>().sqrt();
+    let (near_now, moving) = follows_now(&state, &action, 7);
+    assert!(moving > 5, "the arm hardly moves: {moving} moving ticks");
+    assert_eq!(
+        near_now, moving,
+        "the command's joints, not the next tick's"
+    );
+}
+
+/// Ticks where the state moves (more than 1 mm or 1 mrad over its first `dims` values), and
+/// those among them whose action is within a quarter of that move of the state now: an action
+/// that is the command at the tick, not the next tick's state.
+fn follows_now(state: &[Vec<f32>], action: &[Vec<f32>], dims: usize) -> (usize, usize) {
+    let dist = |a: &[f32], b: &[f32]| (0..dims).map(|d| (a[d] - b[d]).powi(2)).sum::<f32>().sqrt();
     let (mut near_now, mut moving) = (0, 0);
     for t in 0..state.len() - 1 {
         let step = dist(&state[t], &state[t + 1]);
@@ -656,9 +658,5 @@ fn a_leader_arms_joint_states_are_the_joint_space_action() {
             }
         }
     }
-    assert!(moving > 5, "the arm hardly moves: {moving} moving ticks");
-    assert_eq!(
-        near_now, moving,
-        "the command's joints, not the next tick's"
-    );
+    (near_now, moving)
 }

@@ -4,29 +4,7 @@
 //! the rerun resuming from the caches), and `eval` refusing the demonstrations' seeds.
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-use scaledp_tests::{scaledp_bin, synth_episode};
-
-fn scaledp(args: &[&str], cwd: &Path) -> Output {
-    Command::new(scaledp_bin())
-        .args(args)
-        .current_dir(cwd)
-        .stdin(std::process::Stdio::null())
-        .output()
-        .unwrap()
-}
-
-fn ok(out: &Output, what: &str) -> String {
-    assert!(
-        out.status.success(),
-        "{what}: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).to_string()
-}
+use scaledp_tests::{cli_ok, run_scaledp, synth_episode};
 
 #[test]
 fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
@@ -45,15 +23,15 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
         manifest.push_str(&format!("{{\"seed\": {seed}}}\n"));
     }
     std::fs::write(demos.join("collect.jsonl"), manifest).unwrap();
-    ok(
-        &scaledp(
+    cli_ok(
+        &run_scaledp(
             &["convert", "demos", "--out", "ds", "--size", "24x20", "-q"],
             root,
         ),
         "convert",
     );
-    let dry = ok(
-        &scaledp(&["train", "ds", "--preset", "cpu-sim", "--dry-run"], root),
+    let dry = cli_ok(
+        &run_scaledp(&["train", "ds", "--preset", "cpu-sim", "--dry-run"], root),
         "train --dry-run",
     );
     assert!(
@@ -90,7 +68,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
         "--results",
         "results",
     ];
-    ok(&scaledp(&compare, root), "experiment compare");
+    cli_ok(&run_scaledp(&compare, root), "experiment compare");
     let res = root.join("results/toy");
     for f in [
         "ti.json",
@@ -156,7 +134,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
     // A second run finds everything done: nothing trains or evaluates again.
     let before = std::fs::read(res.join("ti.json")).unwrap();
     let t0 = std::time::Instant::now();
-    ok(&scaledp(&compare, root), "experiment compare, again");
+    cli_ok(&run_scaledp(&compare, root), "experiment compare, again");
     let after: serde_json::Value =
         serde_json::from_slice(&std::fs::read(res.join("ti.json")).unwrap()).unwrap();
     let before: serde_json::Value = serde_json::from_slice(&before).unwrap();
@@ -165,7 +143,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
     assert!(t0.elapsed().as_secs_f64() < 60.0);
 
     // eval: the test split holds seed 2 000 001, which the demonstrations used.
-    let refused = scaledp(
+    let refused = run_scaledp(
         &["eval", "runs/toy/ti", "--split", "test", "--episodes", "3"],
         root,
     );
@@ -186,5 +164,5 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
         "--max-seconds",
         "12",
     ];
-    ok(&scaledp(&val, root), "eval --split val");
+    cli_ok(&run_scaledp(&val, root), "eval --split val");
 }

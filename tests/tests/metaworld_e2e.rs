@@ -6,29 +6,7 @@
 //! is there. Needs `.venv-sims` (`scripts/setup-sims.sh`, which `scripts/test.sh` runs).
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
-use std::process::{Command, Output};
-
-use scaledp_tests::{read_json, scaledp_bin};
-
-fn scaledp(args: &[&str], cwd: &Path) -> Output {
-    Command::new(scaledp_bin())
-        .args(args)
-        .current_dir(cwd)
-        .stdin(std::process::Stdio::null())
-        .output()
-        .unwrap()
-}
-
-fn ok(out: &Output, what: &str) -> String {
-    assert!(
-        out.status.success(),
-        "{what}: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).to_string()
-}
+use scaledp_tests::{cli_ok, live_episode, read_json, run_scaledp};
 
 #[test]
 fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
@@ -62,8 +40,8 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
         "--results",
         "results",
     ];
-    let first = ok(
-        &scaledp(&args, root),
+    let first = cli_ok(
+        &run_scaledp(&args, root),
         "experiment compare --benchmark metaworld",
     );
     let res = root.join("results/metaworld");
@@ -110,34 +88,13 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
             >= 2
     );
     // The same checkpoint live: the simulator on its own /clock, serve following it.
-    let report = root.join("live.json");
-    let live = ok(
-        &scaledp(
-            &[
-                "eval",
-                "runs/metaworld/reach/ti",
-                "--live",
-                "--episodes",
-                "1",
-                "--split",
-                "val",
-                "--max-seconds",
-                "0.5",
-                "--report",
-                report.to_str().unwrap(),
-            ],
-            root,
-        ),
-        "eval --live",
-    );
-    let r = read_json(&report);
-    assert_eq!(r["mode"], "live", "{live}\n{r}");
+    let r = live_episode(root, "runs/metaworld/reach/ti", "0.5");
     let ep = &r["episodes"][0];
     assert!(ep["duration_s"].as_f64().unwrap() >= 0.5, "{r}");
     assert!(ep["commanded_ticks"].as_u64().unwrap() >= 5, "{r}");
     assert!(r["real_time_factor"].as_f64().unwrap() > 0.05, "{r}");
     // A second run finds every result there and redoes nothing.
-    let again = ok(&scaledp(&args, root), "compare again");
+    let again = cli_ok(&run_scaledp(&args, root), "compare again");
     assert!(
         !again.contains("test "),
         "nothing re-scored: {again}\n(first: {first})"
