@@ -135,8 +135,8 @@ fn python_options(args: &[&str]) -> Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
-/// A command line moves between the trainers unchanged: the defaults and the `cpu-sim` preset
-/// (with a flag overriding it) give the Rust trainer's options, field by field.
+/// A command line moves between the trainers unchanged: the defaults and every preset (with a
+/// flag overriding it) give the Rust trainer's options, field by field.
 #[test]
 fn the_defaults_and_the_presets_are_the_rust_trainers() {
     use scaledp_policy::TrainOptions;
@@ -147,11 +147,13 @@ fn the_defaults_and_the_presets_are_the_rust_trainers() {
     for k in keys(&py_def) {
         assert_eq!(py_def[&k], def[&k], "default of {k}");
     }
-    let preset = rust(TrainOptions::preset("cpu-sim").unwrap().lr(1e-3));
-    let py_preset = python_options(&["ds", "--preset", "cpu-sim", "--lr", "1e-3"]);
-    for k in keys(&py_preset) {
-        assert_eq!(py_preset[&k], preset[&k], "cpu-sim's {k}");
+    for name in scaledp_policy::PRESETS {
+        let preset = rust(TrainOptions::preset(name).unwrap().lr(1e-3));
+        let py_preset = python_options(&["ds", "--preset", name, "--lr", "1e-3"]);
+        for k in keys(&py_preset) {
+            assert_eq!(py_preset[&k], preset[&k], "{name}'s {k}");
+        }
+        assert_eq!(py_preset["resnet_width"], 32, "{name}");
+        assert_eq!(py_preset["lr"], 1e-3, "{name}");
     }
-    assert_eq!(py_preset["resnet_width"], 32);
-    assert_eq!(py_preset["lr"], 1e-3);
 }

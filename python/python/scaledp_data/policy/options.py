@@ -31,7 +31,7 @@ PRESETS: Dict[str, Dict[str, Any]] = {
                       "warmup_steps": 500, "steps": 2500, "checkpoint_every": 500,
                       "val_ratio": 0.0, "val_every": 0, "image_size": [84, 84]},
     "cpu-aloha": {"resnet_width": 32, "noise_samples": 2, "batch_size": 64, "lr": 3e-4,
-                  "warmup_steps": 500, "steps": 4000, "checkpoint_every": 1000,
+                  "warmup_steps": 500, "steps": 2500, "checkpoint_every": 500,
                   "val_ratio": 0.0, "val_every": 0, "image_size": [128, 96], "action_chunk": 32},
 }
 
@@ -107,8 +107,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grad-clip", type=float, help="clip the global gradient norm")
     p.add_argument("--crop", type=float, default=0.9, help="crop side / image side (random in "
                    "training, centred in inference)")
-    p.add_argument("--obs-horizon", type=int, default=2, help="observation frames per sample, To")
-    p.add_argument("--action-chunk", type=int, default=16, help="actions per chunk, C")
+    p.add_argument("--obs-horizon", type=int, default=None,
+                   help="observation frames per sample, To [2, or the preset's]")
+    p.add_argument("--action-chunk", type=int, default=None,
+                   help="actions per chunk, C [16, or the preset's]")
     p.add_argument("--image-size", type=_size, metavar="WxH", help="resize images to WxH before "
                    "the crop (e.g. 84x84)")
     p.add_argument("--cameras", type=lambda s: [c for c in s.split(",") if c], default=[],
@@ -166,9 +168,11 @@ def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
         o["loss"] = dict(o["loss"], noise_samples=PRESETS[preset].get("noise_samples", 1))
     attention = a.attention if a.attention is not None else ("causal" if dpt else "non-causal")
     o.update({"size": "ti" if dpt else model, "seed": a.seed, "crop": a.crop,
-              "obs_horizon": a.obs_horizon, "action_chunk": a.action_chunk,
               "attention": _attention(attention), "state_norm": state_norm,
               "arch": "dp_t" if dpt else "scale_dp"})
+    for key in ("obs_horizon", "action_chunk"):
+        if getattr(a, key, None) is not None:
+            o[key] = getattr(a, key)
     if getattr(a, "dropout", None) is not None:
         o["dropout"] = float(a.dropout)
     for key in ("batch_size", "lr", "warmup_steps", "checkpoint_every", "val_every",
