@@ -149,36 +149,27 @@ class AlohaEnv:
                                        n_sub_steps=None, flat_observation=False)
 
         seeded = self
-        if self.task == "transfer_cube":
-            base_ee = ee_tasks.TransferCubeEndEffectorTask
+        # Per task: the mocap-driven and joint-controlled task classes, the free joint that
+        # holds its objects (and how many qpos they take), and the two models.
+        base_ee, base_joint, objects_joint, n_qpos = {
+            "transfer_cube": (ee_tasks.TransferCubeEndEffectorTask, joint_tasks.TransferCubeTask,
+                              "red_box_joint", 7),
+            "insertion": (ee_tasks.InsertionEndEffectorTask, joint_tasks.InsertionTask,
+                          "red_peg_joint", 14),
+        }[self.task]
 
-            class SeededEE(_Blind, base_ee):
-                def initialize_episode(self, physics):
-                    self.initialize_robots(physics)
-                    i = physics.model.name2id("red_box_joint", "joint")
-                    np.copyto(physics.data.qpos[i:i + 7], seeded.objects)
-                    base_ee.__mro__[2].initialize_episode(self, physics)
+        class SeededEE(_Blind, base_ee):
+            def initialize_episode(self, physics):
+                self.initialize_robots(physics)
+                i = physics.model.name2id(objects_joint, "joint")
+                np.copyto(physics.data.qpos[i:i + n_qpos], seeded.objects)
+                base_ee.__mro__[2].initialize_episode(self, physics)
 
-            class Joint(_Blind, joint_tasks.TransferCubeTask):
-                pass
+        class Joint(_Blind, base_joint):
+            pass
 
-            self.ee = make("bimanual_viperx_end_effector_transfer_cube.xml", SeededEE())
-            self.joint = make("bimanual_viperx_transfer_cube.xml", Joint())
-        else:
-            base_ee = ee_tasks.InsertionEndEffectorTask
-
-            class SeededEE(_Blind, base_ee):
-                def initialize_episode(self, physics):
-                    self.initialize_robots(physics)
-                    i = physics.model.name2id("red_peg_joint", "joint")
-                    np.copyto(physics.data.qpos[i:i + 14], seeded.objects)
-                    base_ee.__mro__[2].initialize_episode(self, physics)
-
-            class Joint(_Blind, joint_tasks.InsertionTask):
-                pass
-
-            self.ee = make("bimanual_viperx_end_effector_insertion.xml", SeededEE())
-            self.joint = make("bimanual_viperx_insertion.xml", Joint())
+        self.ee = make(f"bimanual_viperx_end_effector_{self.task}.xml", SeededEE())
+        self.joint = make(f"bimanual_viperx_{self.task}.xml", Joint())
         self.physics = self.joint.physics
         known = [self.physics.model.id2name(i, "camera") for i in range(self.physics.model.ncam)]
         for c in cameras:
