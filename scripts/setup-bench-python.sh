@@ -19,5 +19,7 @@ if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.ve
   exit 0
 fi
 .venv-bench/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-.venv-bench/bin/python -m pip install --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"
+# --no-cache-dir: a fresh machine would otherwise keep a second copy of those 4.6 GB in pip's
+# cache, and CI's disk is shared with a release build of ~60 executables.
+.venv-bench/bin/python -m pip install --no-cache-dir --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
