@@ -27,13 +27,10 @@ use scaledp_schema::{ActionSpace, Rig};
 
 use crate::command::{arm_target, Previous};
 use crate::error::{Error, Result};
+use crate::inputs::Inputs;
 pub use crate::options::ControlOptions;
 use crate::safety::{Clamped, Limits, Workspace};
-use crate::streams::Series;
 pub use crate::tick::{Command, Request, Tick};
-
-/// A camera's buffered messages (type, CDR bytes), parallel to its stamps.
-type Frames = VecDeque<(String, Vec<u8>)>;
 
 /// The controller core; see the module documentation.
 #[derive(Debug)]
@@ -43,14 +40,9 @@ pub struct Controller {
     rig: Rig,
     opts: ControlOptions,
     limits: Limits,
-    /// Rig camera index of each checkpoint camera.
-    cams: Vec<usize>,
     kin: Vec<ArmKinematics>,
     grippers: Vec<Option<Gripper>>,
-    /// Per checkpoint camera: stamps (in `Series`, values unused) and messages.
-    frames: Vec<(Series, Frames)>,
-    arms: Vec<Series>,
-    fingers: Vec<Option<Series>>,
+    inputs: Inputs,
     period_ns: f64,
     origin_ns: Option<u64>,
     index: u64,
@@ -109,8 +101,6 @@ impl Controller {
             .iter()
             .map(|a| ArmKinematics::new(a).map_err(|e| Error::Incompatible(e.to_string())))
             .collect::<Result<Vec<_>>>()?;
-        // Frames are big (a raw HD720 bgra8 frame is 3.7 MB): keep those a tick can still pick,
-        // the observation lag plus a few frame periods.
         // Joints are interpolated between the samples around the tick: the tick must trail the
         // clock by more than the slowest joint stream's period.
         let slowest_s = rig
@@ -124,45 +114,8 @@ impl Controller {
         } else {
             opts.obs_lag_s.max(1.5 * slowest_s)
         };
-        let keep_frames_s = obs_lag_s + 0.15;
-        let frames = cams
-            .iter()
-            .map(|&i| {
-                let c = &rig.cameras[i];
-                (
-                    Series::new(
-                        format!("camera {} ({})", c.name, c.topic),
-                        c.fps,
-                        keep_frames_s,
-                    ),
-                    VecDeque::new(),
-                )
-            })
-            .collect();
-        let arms = rig
-            .arms
-            .iter()
-            .map(|a| {
-                Series::new(
-                    format!("arm {} ({})", a.name, a.joint_state_topic),
-                    a.rate_hz,
-                    1.0,
-                )
-            })
-            .collect();
-        let fingers = rig
-            .arms
-            .iter()
-            .map(|a| {
-                a.gripper.as_ref().map(|g| {
-                    Series::new(
-                        format!("gripper of {} ({})", a.name, g.topic),
-                        g.rate_hz,
-                        1.0,
-                    )
-                })
-            })
-            .collect();
+        // Keep the frames a tick can still pick: the observation lag plus a few frame periods.
+        let inputs = Inputs::new(rig, cams, obs_lag_s + 0.15);
         let n = rig.arms.len();
         Ok(Controller {
             limits: Limits {
@@ -173,12 +126,9 @@ impl Controller {
             chain,
             cfg: cfg.clone(),
             rig: rig.clone(),
-            cams,
             kin,
             grippers: rig.arms.iter().map(|a| a.gripper.clone()).collect(),
-            frames,
-            arms,
-            fingers,
+            inputs,
             period_ns: 1e9 / cfg.fps,
             origin_ns: None,
             index: 0,
@@ -219,7 +169,7 @@ impl Controller {
 
     /// Rig camera index of each checkpoint camera, in the checkpoint's order.
     pub fn cameras(&self) -> &[usize] {
-        &self.cams
+        &self.inputs.cams
     }
 
     /// How far the observation instant trails a tick's clock (ns): `obs_lag_s`, or 1.5 periods
@@ -230,7 +180,7 @@ impl Controller {
 
     /// When the newest camera frame was received (receive clock), if any.
     pub fn newest_frame_ns(&self) -> Option<u64> {
-        self.frames.iter().filter_map(|f| f.0.last_heard_ns).max()
+        self.inputs.newest_frame_ns()
     }
 
     /// Expected inference latency in ticks: the next chunk is asked for this many ticks before
@@ -241,17 +191,7 @@ impl Controller {
 
     /// Forgets everything (a new episode): buffers, window, plan, the last commands.
     pub fn reset(&mut self) {
-        for (s, m) in &mut self.frames {
-            *s = s.cleared();
-            m.clear();
-        }
-        for s in self
-            .arms
-            .iter_mut()
-            .chain(self.fingers.iter_mut().flatten())
-        {
-            *s = s.cleared();
-        }
+        self.inputs.clear();
         self.origin_ns = None;
         self.index = 0;
         self.prev_pose.iter_mut().for_each(|p| *p = None);
@@ -272,63 +212,25 @@ impl Controller {
         message_type: &str,
         cdr: Vec<u8>,
     ) {
-        let Some(k) = self.cams.iter().position(|&c| c == camera) else {
-            return;
-        };
-        let (series, msgs) = &mut self.frames[k];
-        let before = series.stamps.len();
-        let newer = series.stamps.back().is_none_or(|&s| s < stamp_ns);
-        series.push(stamp_ns, recv_ns, Vec::new());
-        if newer {
-            msgs.push_back((message_type.to_string(), cdr));
-            let dropped = (before + 1).saturating_sub(series.stamps.len());
-            for _ in 0..dropped {
-                msgs.pop_front();
-            }
-        }
+        self.inputs
+            .on_image(camera, stamp_ns, recv_ns, message_type, cdr);
     }
 
     /// Joint positions of arm `arm` (rig joint order).
     pub fn on_arm_joints(&mut self, arm: usize, stamp_ns: u64, recv_ns: u64, q: Vec<f64>) {
-        if let Some(s) = self.arms.get_mut(arm) {
-            s.push(stamp_ns, recv_ns, q);
-        }
+        self.inputs.on_arm_joints(arm, stamp_ns, recv_ns, q);
     }
 
     /// Finger joint positions of arm `arm`'s gripper (its joint order).
     pub fn on_gripper_joints(&mut self, arm: usize, stamp_ns: u64, recv_ns: u64, q: Vec<f64>) {
-        if let Some(Some(s)) = self.fingers.get_mut(arm) {
-            s.push(stamp_ns, recv_ns, q);
-        }
+        self.inputs.on_gripper_joints(arm, stamp_ns, recv_ns, q);
     }
 
     /// An arm's (`gripper` false) or gripper's `JointState`, joints mapped by name as the
     /// converter maps them; a message lacking one of them is ignored.
     pub fn on_joint_state(&mut self, arm: usize, gripper: bool, recv_ns: u64, js: &JointState) {
-        let names = match (gripper, self.rig.arms.get(arm)) {
-            (false, Some(a)) => &a.joint_names,
-            (true, Some(a)) => match &a.gripper {
-                Some(g) => &g.joint_names,
-                None => return,
-            },
-            _ => return,
-        };
-        let q: Option<Vec<f64>> = names
-            .iter()
-            .map(|n| {
-                js.name
-                    .iter()
-                    .position(|x| x == n)
-                    .and_then(|i| js.position.get(i).copied())
-            })
-            .collect();
-        let Some(q) = q else { return };
-        let stamp = js.header.stamp.as_ns();
-        if gripper {
-            self.on_gripper_joints(arm, stamp, recv_ns, q);
-        } else {
-            self.on_arm_joints(arm, stamp, recv_ns, q);
-        }
+        self.inputs
+            .on_joint_state(&self.rig, arm, gripper, recv_ns, js);
     }
 
     fn stop(&mut self, why: &str) {
@@ -377,16 +279,8 @@ impl Controller {
     /// Builds this tick's frames and state and pushes them onto the window.
     fn observe(&mut self, now_ns: u64, obs_ns: u64) -> std::result::Result<(), String> {
         let opts = self.opts.clone();
-        for s in self
-            .frames
-            .iter()
-            .map(|f| &f.0)
-            .chain(&self.arms)
-            .chain(self.fingers.iter().flatten())
-        {
-            if let Some(why) = s.silence(now_ns, &opts) {
-                return Err(why);
-            }
+        if let Some(why) = self.inputs.silence(now_ns, &opts) {
+            return Err(why);
         }
         // The checkpoint's image chain: the camera frame as the converter stored it (its
         // size, Lanczos3, JPEG quality), decoded and resized to the model's input as the
@@ -401,8 +295,8 @@ impl Controller {
             raw: false,
         };
         let per = 3 * w as usize * h as usize;
-        let mut images = vec![0u8; per * self.frames.len()];
-        for (k, (series, msgs)) in self.frames.iter_mut().enumerate() {
+        let mut images = vec![0u8; per * self.inputs.frames.len()];
+        for (k, (series, msgs)) in self.inputs.frames.iter_mut().enumerate() {
             let stamps = series.stamps.make_contiguous();
             let picked = live::frame_at(stamps, series.period_s, obs_ns, opts.frame_stale_periods);
             let i = match picked {
@@ -423,13 +317,13 @@ impl Controller {
         let space = self.cfg.action_space;
         let mut state = Vec::with_capacity(space.dim(&self.rig));
         let tick_s = self.period_ns * 1e-9;
-        for a in 0..self.arms.len() {
-            let q = self.arms[a]
-                .at(obs_ns, tick_s)
-                .ok_or_else(|| format!("{}: no samples around the tick", self.arms[a].name))?;
+        for a in 0..self.inputs.arms.len() {
+            let q = self.inputs.arms[a].at(obs_ns, tick_s).ok_or_else(|| {
+                format!("{}: no samples around the tick", self.inputs.arms[a].name)
+            })?;
             let base_from_tcp = self.kin[a]
                 .base_from_tcp(&q)
-                .map_err(|e| format!("{}: {e}", self.arms[a].name))?;
+                .map_err(|e| format!("{}: {e}", self.inputs.arms[a].name))?;
             self.measured[a] = base_from_tcp;
             self.measured_q[a].clone_from(&q);
             let mut pose = scaledp_schema::kinematics::pose6_from_transform(base_from_tcp);
@@ -441,7 +335,7 @@ impl Controller {
                 }
             }
             self.prev_pose[a] = Some(pose);
-            let width = match (&mut self.fingers[a], &self.grippers[a]) {
+            let width = match (&mut self.inputs.fingers[a], &self.grippers[a]) {
                 (Some(s), Some(g)) => {
                     let f = s
                         .at(obs_ns, tick_s)
@@ -502,8 +396,8 @@ impl Controller {
             return Err(format!("the policy's action value {k} is {}", action[k]));
         }
         let space = self.cfg.action_space;
-        let mut out = Vec::with_capacity(self.arms.len());
-        for a in 0..self.arms.len() {
+        let mut out = Vec::with_capacity(self.inputs.arms.len());
+        for a in 0..self.inputs.arms.len() {
             let v: Vec<f64> = action[space.arm_range(&self.rig, a)]
                 .iter()
                 .map(|&x| f64::from(x))

@@ -26,6 +26,7 @@ pub mod controller;
 mod error;
 pub mod eval;
 mod expert;
+mod inputs;
 pub mod live;
 mod options;
 mod recording;
