@@ -25,7 +25,7 @@ use plotters::prelude::*;
 use scaledp_policy::{Architecture, TrainOptions, Trainer, DPT_DIMS};
 use serde::{Deserialize, Serialize};
 
-use crate::results::{self, Provenance};
+use crate::results::Provenance;
 
 /// `scaledp experiment grad-scale`.
 #[derive(Debug, Clone, Args)]
@@ -213,11 +213,7 @@ pub fn run(a: &GradScaleArgs, stop: &Arc<AtomicBool>) -> Result<()> {
                     a.image_size,
                     a.seed
                 ),
-                provenance: Provenance {
-                    git_revision: results::git_revision(),
-                    machine: results::machine(),
-                    finished_utc: results::now_utc(),
-                },
+                provenance: Provenance::now(),
             };
             std::fs::write(&path, serde_json::to_vec_pretty(&r)?)
                 .with_context(|| format!("writing {}", path.display()))?;

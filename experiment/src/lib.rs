@@ -307,11 +307,7 @@ fn evaluate_arm(
         test: figures,
         live,
         controls,
-        provenance: Provenance {
-            git_revision: results::git_revision(),
-            machine: results::machine(),
-            finished_utc: results::now_utc(),
-        },
+        provenance: Provenance::now(),
     })
 }
 

@@ -102,7 +102,7 @@ pub struct Controls {
 /// Where and what ran.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Provenance {
-    /// `git rev-parse HEAD` of the tree that ran (with `-dirty` when it had changes).
+    /// The commit the binary that ran was built from ([`git_revision`]).
     pub git_revision: String,
     /// CPU model, cores, memory.
     pub machine: String,
@@ -246,27 +246,25 @@ pub fn table(arms: &[ArmResult]) -> String {
     s
 }
 
-/// `git rev-parse HEAD`, `-dirty` when the tree has changes, or `unknown`.
+/// The commit this binary was built from (`-dirty` when its tree had changes then, `unknown`
+/// when built outside a git checkout): what ran, whatever the checkout says by the time a long
+/// run finishes. Read at compile time; the crate is rebuilt when HEAD or the index moves.
 pub fn git_revision() -> String {
-    let run = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
-    match run(&["rev-parse", "HEAD"]) {
-        Some(rev) => {
-            let dirty = run(&["status", "--porcelain", "--untracked-files=no"])
-                .is_some_and(|s| !s.is_empty());
-            if dirty {
-                format!("{rev}-dirty")
-            } else {
-                rev
-            }
+    git_version::git_version!(
+        args = ["--always", "--dirty=-dirty", "--abbrev=40", "--match=^$"],
+        fallback = "unknown"
+    )
+    .to_string()
+}
+
+impl Provenance {
+    /// This binary's revision, this machine, now.
+    pub fn now() -> Self {
+        Provenance {
+            git_revision: git_revision(),
+            machine: machine(),
+            finished_utc: now_utc(),
         }
-        None => "unknown".into(),
     }
 }
 
@@ -296,4 +294,19 @@ pub fn machine() -> String {
 /// Now as RFC 3339 UTC, to the second.
 pub fn now_utc() -> String {
     humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    /// A full commit hash (a tag in the history must not turn it into `git describe`'s
+    /// `tag-N-gHASH`), `-dirty` at most, or `unknown` outside a checkout.
+    #[test]
+    fn the_revision_is_a_full_commit() {
+        let r = super::git_revision();
+        let hash = r.strip_suffix("-dirty").unwrap_or(&r);
+        assert!(
+            r == "unknown" || (hash.len() == 40 && hash.chars().all(|c| c.is_ascii_hexdigit())),
+            "{r}"
+        );
+    }
 }

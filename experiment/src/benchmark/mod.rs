@@ -274,7 +274,7 @@ pub(crate) fn run(
                 train_options: serde_json::to_value(&opts)?,
                 train_revision: revision,
                 simulator: test.simulator.clone().unwrap_or_default(),
-                provenance: provenance(),
+                provenance: Provenance::now(),
             };
             std::fs::write(&path, serde_json::to_vec_pretty(&result)?)
                 .with_context(|| format!("writing {}", path.display()))?;
@@ -331,19 +331,11 @@ fn controls(
             frozen_cameras: Some(EvalFigures::of(&frozen)),
             scripted_expert: Some(EvalFigures::of(&expert)),
         },
-        provenance: provenance(),
+        provenance: Provenance::now(),
     };
     std::fs::write(&path, serde_json::to_vec_pretty(&c)?)
         .with_context(|| format!("writing {}", path.display()))?;
     rebuild(results_dir)
-}
-
-fn provenance() -> Provenance {
-    Provenance {
-        git_revision: results::git_revision(),
-        machine: results::machine(),
-        finished_utc: results::now_utc(),
-    }
 }
 
 /// The command line that reproduces one (task, arm).
