@@ -7,7 +7,9 @@
 //! and the tick's commands (or none: the simulator holds its last target) step the simulator.
 //! An episode is a success when the simulator reports success at any step (MetaWorld's
 //! `info["success"]`), and ends there or at the simulator's last step. The scripted expert
-//! (the ceiling control) runs the same loop with the simulator's own expert instead.
+//! (the ceiling control) runs the same loop with the simulator's own expert instead. A task
+//! whose reward counts stages (ALOHA's) also reports each episode's highest reward and, per
+//! stage, how many episodes reached it.
 
 use std::time::Instant;
 
@@ -20,7 +22,7 @@ use crate::controller::{ControlOptions, Controller};
 use crate::error::{Error, Result};
 use crate::eval::{summarize, EpisodeReport, EvalOptions, EvalReport, ORIGIN_NS};
 use crate::recording::Rollout;
-use crate::stats::percentile;
+use crate::stats::{percentile, stage_counts};
 
 /// Hands one observation to the controller (and the rollout), stamped `t_ns`.
 fn feed(
@@ -70,6 +72,23 @@ fn record_commands(rig: &Rig, cmds: &[ArmCommand], t_ns: u64, r: &mut Rollout) -
     Ok(())
 }
 
+/// The stage counts of `episodes` when the simulator names stages.
+fn with_stages(bridge: &Bridge, mut report: EvalReport) -> EvalReport {
+    let names = &bridge.hello().stages;
+    if !names.is_empty() {
+        let highest: Vec<Option<f64>> = report.episodes.iter().map(|e| e.highest_reward).collect();
+        report.stages = stage_counts(names, &highest);
+    }
+    report
+}
+
+/// The highest reward so far, for a simulator that names stages.
+fn track(bridge: &Bridge, highest: &mut Option<f64>, obs: &Observation) {
+    if !bridge.hello().stages.is_empty() {
+        *highest = Some(highest.map_or(obs.reward, |h| h.max(obs.reward)));
+    }
+}
+
 /// The last step of an episode: the simulator's, or fewer within `max_seconds`.
 fn last_step(bridge: &Bridge, opts: &EvalOptions) -> u64 {
     let by_time = (opts.max_seconds / bridge.hello().step_s).floor() as u64;
@@ -117,6 +136,7 @@ pub fn run_bridge_eval(
         let mut success_at = None;
         loop {
             let t = ORIGIN_NS + obs.step * dt;
+            track(&bridge, &mut rep.highest_reward, &obs);
             feed(rig, &obs, t, &mut ctl, rollout.as_mut())?;
             if obs.success {
                 success_at = Some(obs.step);
@@ -167,13 +187,16 @@ pub fn run_bridge_eval(
         on_episode(&rep);
         episodes.push(rep);
     }
-    let mut report = summarize(
-        &ckpt,
-        rig,
-        "simulated-time",
-        opts,
-        policy.config().fps,
-        episodes,
+    let mut report = with_stages(
+        &bridge,
+        summarize(
+            &ckpt,
+            rig,
+            "simulated-time",
+            opts,
+            policy.config().fps,
+            episodes,
+        ),
     );
     report.simulator = Some(bridge.hello().versions.clone());
     report.inference_ms_p50 = percentile(&latencies_ms, 0.5);
@@ -198,10 +221,12 @@ pub fn run_bridge_expert(
         let wall = Instant::now();
         let mut obs = bridge.reset(seed, false)?;
         let end = last_step(&bridge, opts);
+        let mut rep = EpisodeReport::empty(seed);
+        track(&bridge, &mut rep.highest_reward, &obs);
         while !obs.success && !obs.done && obs.step < end {
             obs = bridge.expert_step(false)?;
+            track(&bridge, &mut rep.highest_reward, &obs);
         }
-        let mut rep = EpisodeReport::empty(seed);
         rep.success = obs.success;
         rep.time_to_success_s = obs.success.then_some(obs.step as f64 * s);
         rep.duration_s = obs.step as f64 * s;
@@ -209,13 +234,16 @@ pub fn run_bridge_expert(
         on_episode(&rep);
         episodes.push(rep);
     }
-    let mut report = summarize(
-        "(scripted expert)",
-        rig,
-        "scripted-expert",
-        opts,
-        1.0 / s,
-        episodes,
+    let mut report = with_stages(
+        &bridge,
+        summarize(
+            "(scripted expert)",
+            rig,
+            "scripted-expert",
+            opts,
+            1.0 / s,
+            episodes,
+        ),
     );
     report.simulator = Some(bridge.hello().versions.clone());
     report.wall_s = started.elapsed().as_secs_f64();

@@ -23,7 +23,7 @@ use serde::Serialize;
 use crate::controller::{ControlOptions, Controller};
 use crate::error::{Error, Result};
 use crate::recording::Rollout;
-use crate::stats::{percentile, wilson_interval};
+use crate::stats::{percentile, wilson_interval, StageCount};
 
 /// The first validation seed: checkpoints are chosen and recipes tuned on seeds from here.
 pub const VALIDATION_SEED: u64 = 1_000_000;
@@ -122,6 +122,9 @@ pub struct EpisodeReport {
     pub wall_s: f64,
     /// The rollout's MCAP file (`--recordings`).
     pub recording: Option<String>,
+    /// A staged task (ALOHA's): the highest reward of the episode (the stage it reached).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highest_reward: Option<f64>,
 }
 
 /// The run's report (`--report` JSON).
@@ -165,6 +168,9 @@ pub struct EvalReport {
     /// wall clock (1: real time).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub real_time_factor: Option<f64>,
+    /// A staged task (ALOHA's): per stage, the episodes that reached it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<StageCount>,
 }
 
 impl EpisodeReport {
@@ -182,6 +188,7 @@ impl EpisodeReport {
             halted_ticks: 0,
             wall_s: 0.0,
             recording: None,
+            highest_reward: None,
         }
     }
 }
@@ -322,6 +329,7 @@ pub(crate) fn summarize(
         wall_s: 0.0,
         simulator: None,
         real_time_factor: None,
+        stages: Vec::new(),
         episodes,
     }
 }

@@ -44,4 +44,4 @@ pub use live::run_live;
 pub use recording::task_text;
 pub use safety::{Limits, Workspace};
 pub use serve::{ServeOptions, Server, Status};
-pub use stats::{percentile, wilson_interval};
+pub use stats::{percentile, stage_counts, wilson_interval, StageCount};

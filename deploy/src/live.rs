@@ -89,6 +89,7 @@ pub fn run_live(
             halted_ticks: st.halted_ticks,
             wall_s: wall.elapsed().as_secs_f64(),
             recording: None,
+            highest_reward: None,
         };
         on_episode(&ep);
         episodes.push(ep);

@@ -1,5 +1,48 @@
-//! Small statistics for reports: the Wilson score interval of a success rate and latency
-//! percentiles.
+//! Small statistics for reports: the Wilson score interval of a success rate, latency
+//! percentiles, and how many episodes reached each stage of a task whose reward counts stages.
+
+use serde::{Deserialize, Serialize};
+
+/// Episodes that reached one stage of a staged task (their highest reward at least `reward`),
+/// as ACT's evaluation counts them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageCount {
+    /// What the stage is (`lifted`).
+    pub stage: String,
+    /// The reward that marks it (1, 2, …).
+    pub reward: u32,
+    /// Episodes whose highest reward was at least `reward`.
+    pub episodes: u64,
+    /// Of all episodes (0–1).
+    pub rate: f64,
+    /// 95 % Wilson interval of `rate`.
+    pub wilson_95: [f64; 2],
+}
+
+/// Per stage (`names[i]` is reward i + 1), the episodes whose highest reward reached it;
+/// episodes without a reward count as reaching none.
+pub fn stage_counts(names: &[String], highest: &[Option<f64>]) -> Vec<StageCount> {
+    let n = highest.len() as u64;
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let reward = i as u32 + 1;
+            let k = highest
+                .iter()
+                .filter(|h| h.is_some_and(|h| h >= f64::from(reward)))
+                .count() as u64;
+            let (lo, hi) = wilson_interval(k, n);
+            StageCount {
+                stage: name.clone(),
+                reward,
+                episodes: k,
+                rate: k as f64 / n.max(1) as f64,
+                wilson_95: [lo, hi],
+            }
+        })
+        .collect()
+}
 
 /// The 95 % Wilson score interval of `k` successes in `n` trials ((0, 1) without trials).
 pub fn wilson_interval(k: u64, n: u64) -> (f64, f64) {
@@ -39,6 +82,30 @@ mod tests {
         let (lo, hi) = wilson_interval(100, 100);
         assert!((lo - 0.9630).abs() < 1e-3 && hi == 1.0, "{lo} {hi}");
         assert_eq!(wilson_interval(0, 0), (0.0, 1.0));
+    }
+
+    #[test]
+    fn stages_count_episodes_whose_highest_reward_reached_them() {
+        let names: Vec<String> = ["touched", "lifted", "transferred"]
+            .map(String::from)
+            .to_vec();
+        // Highest rewards 0, 1, 3, 2, none: touched by 3, lifted by 2, transferred by 1.
+        let highest = [Some(0.0), Some(1.0), Some(3.0), Some(2.0), None];
+        let c = stage_counts(&names, &highest);
+        let got: Vec<(&str, u32, u64)> = c
+            .iter()
+            .map(|s| (s.stage.as_str(), s.reward, s.episodes))
+            .collect();
+        assert_eq!(
+            got,
+            [("touched", 1, 3), ("lifted", 2, 2), ("transferred", 3, 1)]
+        );
+        assert!((c[1].rate - 0.4).abs() < 1e-12);
+        assert_eq!(c[1].wilson_95, {
+            let (lo, hi) = wilson_interval(2, 5);
+            [lo, hi]
+        });
+        assert!(stage_counts(&[], &highest).is_empty());
     }
 
     #[test]

@@ -34,6 +34,9 @@ pub struct EvalFigures {
     pub e2e_ms_p50: Option<f64>,
     /// Wall time of the evaluation (s).
     pub wall_s: f64,
+    /// A staged task (ALOHA's): per stage, the episodes that reached it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stages: Vec<scaledp_deploy::StageCount>,
 }
 
 impl EvalFigures {
@@ -59,6 +62,7 @@ impl EvalFigures {
             inference_ms_p99: r.inference_ms_p99,
             e2e_ms_p50: r.e2e_ms_p50,
             wall_s: r.wall_s,
+            stages: r.stages.clone(),
         }
     }
 

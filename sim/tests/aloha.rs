@@ -59,7 +59,8 @@ fn viperx_kinematics_match_alohas_gripper_link() {
 
 /// Each task's expert succeeds on a seed, reporting joint targets and gripper openings; those
 /// commands replayed through `step` reproduce its success and its end pose; a seed fixes the
-/// scene and another moves the objects.
+/// scene and another moves the objects. Its reward climbs gym-aloha's four named stages, the
+/// last one being the success.
 #[test]
 fn experts_succeed_and_their_joint_commands_replay() {
     for (task, seed) in [("transfer-cube", 2u64), ("insertion", 3)] {
@@ -73,10 +74,24 @@ fn experts_succeed_and_their_joint_commands_replay() {
         assert_eq!(a.images[0].len(), 128 * 96 * 3);
         assert_eq!(a.images, b.images, "{task}: seed {seed} twice");
         assert_ne!(a.images, c.images, "{task}: another seed moves the objects");
+        assert_eq!(
+            bridge.hello().stages.len(),
+            4,
+            "{task}: {:?}",
+            bridge.hello()
+        );
         let mut obs = bridge.reset(seed, false).unwrap();
         let mut commands: Vec<Vec<ArmCommand>> = Vec::new();
+        // The first step at which the reward reached each stage.
+        let mut reached: [Option<u64>; 4] = [None; 4];
         while !obs.done {
             obs = bridge.expert_step(false).unwrap();
+            assert_eq!(obs.success, obs.reward >= 4.0, "{task}: step {}", obs.step);
+            for (k, r) in reached.iter_mut().enumerate() {
+                if obs.reward >= (k + 1) as f64 {
+                    r.get_or_insert(obs.step);
+                }
+            }
             assert_eq!(obs.commands.len(), 2);
             for c in &obs.commands {
                 assert_eq!(c.joints.as_ref().map(Vec::len), Some(6), "{task}: {c:?}");
@@ -87,6 +102,8 @@ fn experts_succeed_and_their_joint_commands_replay() {
             commands.push(obs.commands.clone());
         }
         assert!(obs.succeeded, "{task}: the expert succeeds on seed {seed}");
+        let steps: Vec<u64> = reached.iter().map(|r| r.unwrap()).collect();
+        assert!(steps.windows(2).all(|w| w[0] <= w[1]), "{task}: {steps:?}");
         assert_eq!(obs.step, 400, "{task}: ALOHA's episodes are 400 steps");
         let mut replay = bridge.reset(seed, false).unwrap();
         for c in &commands {

@@ -77,8 +77,25 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
     let c = read_json(&res.join("transfer-cube--controls.json"));
     assert_eq!(c["controls"]["scripted_expert"]["episodes"], 2, "{c}");
     assert_eq!(c["controls"]["untrained"]["episodes"], 1, "{c}");
+    // Every evaluation counts the episodes that reached each of gym-aloha's reward stages.
+    let stages: Vec<&str> = c["controls"]["scripted_expert"]["stages"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no stages: {c}"))
+        .iter()
+        .map(|s| s["stage"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        stages,
+        ["touched", "lifted", "transfer attempted", "transferred"],
+        "{c}"
+    );
+    assert_eq!(r["test"]["stages"].as_array().map(Vec::len), Some(4), "{r}");
     let table = std::fs::read_to_string(res.join("table.md")).unwrap();
     assert!(table.contains("| bimanual | transfer-cube |"), "{table}");
+    assert!(
+        table.contains("| scripted expert | 0/2 | 0/2 | 0/2 | 0/2 |"),
+        "0.3 s is too short for any stage: {table}"
+    );
     assert!(res.join("success_by_level.svg").exists());
 
     // The same recordings in TCP space: 6D pose and gripper per arm.

@@ -139,6 +139,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         }
         md.push('\n');
     }
+    md.push_str(&stages_table(&tasks, &arms, &get, &l));
     md.push_str(
         "\nMean over each level's tasks (tasks where every arm has a result):\n\n| level | tasks |",
     );
@@ -200,6 +201,55 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         dir.display()
     );
     Ok(())
+}
+
+/// For staged tasks (ALOHA's), the episodes of each arm and control that reached each stage
+/// (highest reward ≥ 1, 2, …), as ACT's evaluation reports them; empty for other tasks.
+fn stages_table<'a>(
+    tasks: &[(Level, String)],
+    arms: &[&str],
+    get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
+    l: &'a Loaded,
+) -> String {
+    let mut md = String::new();
+    for (_, task) in tasks {
+        let c = l.controls.get(task).map(|c| &c.controls);
+        let mut rows: Vec<(&str, &EvalFigures)> = arms
+            .iter()
+            .filter_map(|a| get(task, a).map(|r| (*a, &r.test)))
+            .collect();
+        for (who, f) in [
+            (
+                "scripted expert",
+                c.and_then(|c| c.scripted_expert.as_ref()),
+            ),
+            ("untrained", c.and_then(|c| c.untrained.as_ref())),
+            ("cameras frozen", c.and_then(|c| c.frozen_cameras.as_ref())),
+        ] {
+            rows.extend(f.map(|f| (who, f)));
+        }
+        rows.retain(|(_, f)| !f.stages.is_empty());
+        let Some((_, first)) = rows.first() else {
+            continue;
+        };
+        md.push_str(&format!(
+            "\n{task}: test episodes that reached each stage (highest reward ≥ 1, 2, …):\n\n| |"
+        ));
+        for s in &first.stages {
+            md.push_str(&format!(" {} |", s.stage));
+        }
+        md.push_str("\n|---|");
+        md.push_str(&"---|".repeat(first.stages.len()));
+        md.push('\n');
+        for (who, f) in &rows {
+            md.push_str(&format!("| {who} |"));
+            for s in &f.stages {
+                md.push_str(&format!(" {}/{} |", s.episodes, f.episodes));
+            }
+            md.push('\n');
+        }
+    }
+    md
 }
 
 fn short(rev: &str) -> String {

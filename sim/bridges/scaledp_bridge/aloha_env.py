@@ -32,6 +32,12 @@ FINGER_OPEN_M = 0.05800
 STEPS = 400
 ARM_JOINTS = ["waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate"]
 TASKS = {"transfer-cube": "transfer_cube", "insertion": "insertion"}
+#: What each of gym-aloha's rewards 1-4 means (its ``get_reward``), the stages ACT's evaluation
+#: counts episodes by (highest reward >= r): the cube touched by the right gripper, lifted off
+#: the table, touched by the left gripper, held by it off the table; both grippers touching
+#: peg and socket, both lifted, the peg touching the socket in the air, the pin touched.
+STAGES = {"transfer_cube": ["touched", "lifted", "transfer attempted", "transferred"],
+          "insertion": ["both touched", "both grasped", "peg meets socket", "inserted"]}
 
 
 def width_of(normalized: float) -> float:
@@ -194,7 +200,7 @@ class AlohaEnv:
                 for side in ("left", "right")]
         return {"env": "aloha", "task": self.task, "step_s": 0.02, "max_steps": STEPS,
                 "cameras": [{"name": c, "width": self.width, "height": self.height} for c in self.cameras],
-                "arms": arms, "versions": self.versions}
+                "arms": arms, "versions": self.versions, "stages": STAGES[self.task]}
 
     def _draw(self, seed: int) -> np.ndarray:
         from gym_aloha.utils import sample_box_pose, sample_insertion_pose

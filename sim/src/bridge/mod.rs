@@ -48,6 +48,10 @@ pub struct Hello {
     /// Package versions (`metaworld`, `mujoco`, …): recorded with every result.
     #[serde(default)]
     pub versions: BTreeMap<String, String>,
+    /// A task whose reward counts stages (gym-aloha's 0–4): the name of reward 1, 2, …, its
+    /// last the success. Empty when the reward is shaped (MetaWorld's).
+    #[serde(default)]
+    pub stages: Vec<String>,
 }
 
 /// One arm as the simulator measured it.
@@ -84,6 +88,8 @@ struct Header {
     #[serde(default)]
     succeeded: bool,
     #[serde(default)]
+    reward: f64,
+    #[serde(default)]
     done: bool,
     #[serde(default)]
     render: bool,
@@ -102,6 +108,8 @@ pub struct Observation {
     pub success: bool,
     /// The task has been a success at some step of this episode.
     pub succeeded: bool,
+    /// The task's reward at this step (a stage count when [`Hello::stages`] names them).
+    pub reward: f64,
     /// The episode has taken the simulator's last step.
     pub done: bool,
     /// Per rig camera, its RGB pixels (empty when the step was not rendered).
@@ -238,6 +246,7 @@ impl Bridge {
                 step_s: 0.0,
                 max_steps: 0,
                 versions: BTreeMap::new(),
+                stages: Vec::new(),
             },
             child,
             stdin,
@@ -365,6 +374,7 @@ impl Bridge {
             arms: h.arms,
             success: h.success,
             succeeded: h.succeeded,
+            reward: h.reward,
             done: h.done,
             images,
             commands,

@@ -215,8 +215,11 @@ fn with_progress(
                     .join(", ")
             ),
         };
+        let reward = e
+            .highest_reward
+            .map_or(String::new(), |r| format!(", highest reward {r}"));
         let line = format!(
-            "seed {}: {outcome}, {:.1} s simulated, {} chunks, {} clamped ticks, {:.1} s wall",
+            "seed {}: {outcome}{reward}, {:.1} s simulated, {} chunks, {} clamped ticks, {:.1} s wall",
             e.seed, e.duration_s, e.chunks, e.clamped_ticks, e.wall_s
         );
         bar.suspend(|| println!("{line}"));
@@ -276,5 +279,16 @@ fn finish(
         report.wall_s,
         path.display()
     );
+    if !report.stages.is_empty() {
+        let stages: Vec<String> = report
+            .stages
+            .iter()
+            .map(|s| format!("{} {}/{}", s.stage, s.episodes, report.episodes.len()))
+            .collect();
+        println!(
+            "stages reached (highest reward ≥ 1, 2, …): {}",
+            stages.join(", ")
+        );
+    }
     Ok(())
 }
