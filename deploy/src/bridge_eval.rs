@@ -72,8 +72,10 @@ fn record_commands(rig: &Rig, cmds: &[ArmCommand], t_ns: u64, r: &mut Rollout) -
     Ok(())
 }
 
-/// The stage counts of `episodes` when the simulator names stages.
-fn with_stages(bridge: &Bridge, mut report: EvalReport) -> EvalReport {
+/// What the simulator adds to a report: its versions, and the stage counts of the episodes
+/// when it names stages.
+fn with_simulator(bridge: &Bridge, mut report: EvalReport) -> EvalReport {
+    report.simulator = Some(bridge.hello().versions.clone());
     let names = &bridge.hello().stages;
     if !names.is_empty() {
         let highest: Vec<Option<f64>> = report.episodes.iter().map(|e| e.highest_reward).collect();
@@ -187,7 +189,7 @@ pub fn run_bridge_eval(
         on_episode(&rep);
         episodes.push(rep);
     }
-    let mut report = with_stages(
+    let mut report = with_simulator(
         &bridge,
         summarize(
             &ckpt,
@@ -198,7 +200,6 @@ pub fn run_bridge_eval(
             episodes,
         ),
     );
-    report.simulator = Some(bridge.hello().versions.clone());
     report.inference_ms_p50 = percentile(&latencies_ms, 0.5);
     report.inference_ms_p99 = percentile(&latencies_ms, 0.99);
     report.wall_s = started.elapsed().as_secs_f64();
@@ -234,7 +235,7 @@ pub fn run_bridge_expert(
         on_episode(&rep);
         episodes.push(rep);
     }
-    let mut report = with_stages(
+    let mut report = with_simulator(
         &bridge,
         summarize(
             "(scripted expert)",
@@ -245,7 +246,6 @@ pub fn run_bridge_expert(
             episodes,
         ),
     );
-    report.simulator = Some(bridge.hello().versions.clone());
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
 }
