@@ -80,7 +80,8 @@ pub struct LiveTask {
     pub time_to_success_s: Option<f64>,
     /// The simulator's last step is taken.
     pub done: bool,
-    /// Simulated seconds per wall-clock second over the last second.
+    /// Simulated seconds per wall-clock second over the last full second (over the run so far
+    /// until a second has passed).
     pub real_time_factor: f64,
 }
 
@@ -279,7 +280,8 @@ fn run(
     let mut obs = bridge.reset(seed, true)?;
     let mut success_at = None;
     let (mut last_status, mut rtf_mark) = (Instant::now(), (Instant::now(), sim_ns));
-    let mut rtf = 0.0;
+    // The last full second's rate, once a second has passed.
+    let mut rtf_full: Option<f64> = None;
     while !sh.stop.load(Ordering::Relaxed) {
         if let Some(s) = lock(&sh.reset).take() {
             seed = s;
@@ -304,10 +306,14 @@ fn run(
         if obs.success && success_at.is_none() {
             success_at = Some(obs.step);
         }
-        if rtf_mark.0.elapsed() >= Duration::from_secs(1) {
-            rtf = (stamp - rtf_mark.1) as f64 / 1e9 / rtf_mark.0.elapsed().as_secs_f64();
+        let window_s = rtf_mark.0.elapsed().as_secs_f64();
+        let window_rtf = (stamp - rtf_mark.1) as f64 / 1e9 / window_s.max(1e-9);
+        if window_s >= 1.0 {
+            rtf_full = Some(window_rtf);
             rtf_mark = (Instant::now(), stamp);
         }
+        // Before the first full second (a short run on a fast machine), the rate so far.
+        let rtf = rtf_full.unwrap_or(window_rtf);
         let s = dt as f64 * 1e-9;
         *lock(&sh.task) = LiveTask {
             seed,
