@@ -172,6 +172,7 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                         false => enc,
                     },
                     compressed: t.message_type.ends_with("CompressedImage"),
+                    vertical_fov_deg: None,
                 });
             }
             "sensor_msgs/msg/JointState" => {

@@ -228,6 +228,10 @@ pub struct Camera {
     /// True when the topic carries `sensor_msgs/CompressedImage`.
     #[serde(default)]
     pub compressed: bool,
+    /// A simulated camera's vertical field of view (degrees), replacing the simulator's own: a
+    /// zoom that spends a small image's pixels on the workspace. Real cameras ignore it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertical_fov_deg: Option<f64>,
 }
 
 impl Camera {
@@ -446,6 +450,12 @@ impl Rig {
             if cam.width == 0 || cam.height == 0 || !positive(cam.fps) {
                 return Err(format!(
                     "camera '{}': width, height and fps must be > 0",
+                    cam.name
+                ));
+            }
+            if let Some(fov) = cam.vertical_fov_deg.filter(|f| !(*f > 0.0 && *f < 180.0)) {
+                return Err(format!(
+                    "camera '{}': vertical_fov_deg {fov} is not between 0 and 180",
                     cam.name
                 ));
             }

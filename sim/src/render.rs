@@ -75,7 +75,13 @@ impl View {
     pub fn for_camera(scene: &Scene, cam: &Camera, index: usize) -> Self {
         let arms = scene.arms();
         let wrist = cam.name.contains("wrist") && !arms.is_empty();
-        let hfov = horizontal_fov_rad(cam.model, wrist);
+        let hfov = match cam.vertical_fov_deg {
+            Some(v) => {
+                let aspect = f64::from(cam.width) / f64::from(cam.height);
+                2.0 * ((v.to_radians() / 2.0).tan() * aspect).atan()
+            }
+            None => horizontal_fov_rad(cam.model, wrist),
+        };
         let f_px = f64::from(cam.width) / 2.0 / (hfov / 2.0_f64).tan();
         let mount = if wrist {
             let arm = arms

@@ -163,3 +163,43 @@ fn bad_commands_are_one_clear_error() {
         .fold(0.0, f64::max);
     assert!(drift < 0.02, "holding the start drifts {drift} rad");
 }
+
+/// The rig's zoom reaches the simulator: the top camera renders at the rig's
+/// `vertical_fov_deg`, and the cube then covers at least twice the pixels it covers at
+/// gym-aloha's own 78°; a field of view out of range is refused when the rig loads.
+#[test]
+fn the_rigs_zoom_enlarges_the_cube() {
+    let red_pixels = |rig: &Rig| {
+        let mut bridge = Bridge::spawn(rig).unwrap();
+        let fovy = bridge.hello().cameras[0].fovy_deg;
+        let obs = bridge.reset(1_000_000, true).unwrap();
+        let red = obs.images[0]
+            .chunks_exact(3)
+            .filter(|p| p[0] > 150 && p[1] < 80 && p[2] < 80)
+            .count();
+        (fovy, red)
+    };
+    let zoomed = rig("transfer-cube");
+    let want = zoomed.cameras[0].vertical_fov_deg.unwrap();
+    let mut wide = zoomed.clone();
+    wide.cameras[0].vertical_fov_deg = None;
+    let (fovy_zoomed, red_zoomed) = red_pixels(&zoomed);
+    let (fovy_wide, red_wide) = red_pixels(&wide);
+    eprintln!("cube: {red_wide} px at {fovy_wide}°, {red_zoomed} px at {fovy_zoomed}°");
+    assert_eq!(fovy_zoomed, want);
+    assert_eq!(fovy_wide, 78.0);
+    assert!(
+        red_wide > 0 && red_zoomed >= 2 * red_wide,
+        "{red_wide} → {red_zoomed} px"
+    );
+
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../rigs/aloha.toml");
+    let text = std::fs::read_to_string(path)
+        .unwrap()
+        .replace("TASK", "transfer-cube")
+        .replace("vertical_fov_deg = 45.0", "vertical_fov_deg = 190.0");
+    let e = Rig::parse(&text, std::path::Path::new(path))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("vertical_fov_deg 190"), "{e}");
+}

@@ -15,12 +15,15 @@ def main() -> int:
     p.add_argument("--task", required=True)
     p.add_argument("--cameras", required=True, help="comma-separated camera names")
     p.add_argument("--size", default="84x84", help="WxH of every camera")
+    p.add_argument("--fovy", default="", help="camera=degrees,...: vertical fields of view that "
+                   "replace the model's")
     a = p.parse_args()
     os.environ.setdefault("MUJOCO_GL", "egl")
     # One renderer thread: the bridge shares two cores with a recorder and a policy.
     os.environ.setdefault("LP_NUM_THREADS", "1")
     w, h = (int(v) for v in a.size.split("x"))
     cameras = [c for c in a.cameras.split(",") if c]
+    from .cameras import parse_fovy
     from .protocol import claim_stdout, serve
 
     claim_stdout()
@@ -29,11 +32,11 @@ def main() -> int:
         if a.env == "metaworld":
             from .metaworld_env import MetaWorldEnv
 
-            env = MetaWorldEnv(a.task, cameras, w, h)
+            env = MetaWorldEnv(a.task, cameras, w, h, parse_fovy(a.fovy))
         else:
             from .aloha_env import AlohaEnv
 
-            env = AlohaEnv(a.task, cameras, w, h)
+            env = AlohaEnv(a.task, cameras, w, h, parse_fovy(a.fovy))
     except Exception as e:  # noqa: BLE001 -- one line for the caller, then exit
         print(f"scaledp_bridge: {type(e).__name__}: {e}", file=sys.stderr)
         return 2

@@ -20,10 +20,11 @@
 from __future__ import annotations
 
 import os
-from typing import Any, Dict, List, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from .cameras import set_up
 from .protocol import Reply
 
 #: Each finger's travel (gym-aloha's PUPPET_GRIPPER_POSITION_CLOSE / OPEN).
@@ -125,7 +126,8 @@ class _Blind:
 class AlohaEnv:
     """One gym-aloha task behind the bridge protocol."""
 
-    def __init__(self, task: str, cameras: Sequence[str], width: int, height: int):
+    def __init__(self, task: str, cameras: Sequence[str], width: int, height: int,
+                 fovy: Optional[Dict[str, float]] = None):
         os.environ.setdefault("MUJOCO_GL", "egl")
         import gym_aloha
         import mujoco
@@ -177,10 +179,8 @@ class AlohaEnv:
         self.ee = make(f"bimanual_viperx_end_effector_{self.task}.xml", SeededEE())
         self.joint = make(f"bimanual_viperx_{self.task}.xml", Joint())
         self.physics = self.joint.physics
-        known = [self.physics.model.id2name(i, "camera") for i in range(self.physics.model.ncam)]
-        for c in cameras:
-            if c not in known:
-                raise ValueError(f"ALOHA has no camera {c!r}: {', '.join(known)}")
+        self.camera_info = set_up(self.physics.model.ptr, cameras, width, height, fovy or {},
+                                  "ALOHA")
         self.cameras = list(cameras)
         self.width, self.height = width, height
         self.renderer = mujoco.Renderer(self.physics.model.ptr, height, width)
@@ -199,7 +199,7 @@ class AlohaEnv:
                  "gripper_joints": [f"vx300s_{side}/left_finger", f"vx300s_{side}/right_finger"]}
                 for side in ("left", "right")]
         return {"env": "aloha", "task": self.task, "step_s": 0.02, "max_steps": STEPS,
-                "cameras": [{"name": c, "width": self.width, "height": self.height} for c in self.cameras],
+                "cameras": self.camera_info,
                 "arms": arms, "versions": self.versions, "stages": STAGES[self.task]}
 
     def _draw(self, seed: int) -> np.ndarray:

@@ -23,10 +23,11 @@
 from __future__ import annotations
 
 import os
-from typing import Any, Dict, List, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from .cameras import set_up
 from .protocol import Reply
 
 #: The fingers' opening (m) with both pads fully open.
@@ -38,7 +39,8 @@ GRIPPER_JOINTS = ["r_close", "l_close"]
 class MetaWorldEnv:
     """One MetaWorld task behind the bridge protocol."""
 
-    def __init__(self, task: str, cameras: Sequence[str], width: int, height: int):
+    def __init__(self, task: str, cameras: Sequence[str], width: int, height: int,
+                 fovy: Optional[Dict[str, float]] = None):
         os.environ.setdefault("MUJOCO_GL", "egl")
         import metaworld
         import mujoco
@@ -60,10 +62,7 @@ class MetaWorldEnv:
         m = self.env.model
         m.vis.quality.shadowsize = 0
         m.vis.quality.offsamples = 0
-        known = [m.camera(i).name for i in range(m.ncam)]
-        for c in cameras:
-            if c not in known:
-                raise ValueError(f"MetaWorld has no camera {c!r}: {', '.join(known)}")
+        self.camera_info = set_up(m, cameras, width, height, fovy or {}, "MetaWorld")
         self.cameras = list(cameras)
         # Some tasks declare an object's joint before the arm's: read the arm by joint name.
         self.arm_adr = [int(m.jnt_qposadr[m.joint(n).id]) for n in ARM_JOINTS]
@@ -83,7 +82,7 @@ class MetaWorldEnv:
             "env": "metaworld", "task": self.name,
             "step_s": float(self.env.model.opt.timestep * self.env.frame_skip),
             "max_steps": self.max_steps,
-            "cameras": [{"name": c, "width": self.width, "height": self.height} for c in self.cameras],
+            "cameras": self.camera_info,
             "arms": [{"joints": ARM_JOINTS, "gripper_joints": GRIPPER_JOINTS}],
             "versions": self.versions,
         }

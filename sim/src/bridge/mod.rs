@@ -52,6 +52,18 @@ pub struct Hello {
     /// last the success. Empty when the reward is shaped (MetaWorld's).
     #[serde(default)]
     pub stages: Vec<String>,
+    /// The cameras as the simulator renders them.
+    #[serde(default)]
+    pub cameras: Vec<HelloCamera>,
+}
+
+/// One camera as the simulator renders it.
+#[derive(Debug, Clone, Deserialize)]
+pub struct HelloCamera {
+    /// Its name in the simulator's model.
+    pub name: String,
+    /// Its vertical field of view (degrees), after the rig's `vertical_fov_deg`.
+    pub fovy_deg: f64,
 }
 
 /// One arm as the simulator measured it.
@@ -199,6 +211,12 @@ impl Bridge {
             )));
         }
         let cameras: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
+        // `name=degrees` for each camera the rig zooms.
+        let fovy: Vec<String> = rig
+            .cameras
+            .iter()
+            .filter_map(|c| c.vertical_fov_deg.map(|f| format!("{}={f}", c.name)))
+            .collect();
         let py = python()?;
         let src = process::sources_dir()?;
         let mut child = Command::new(&py)
@@ -210,6 +228,8 @@ impl Bridge {
             .arg(cameras.join(","))
             .arg("--size")
             .arg(format!("{w}x{h}"))
+            .arg("--fovy")
+            .arg(fovy.join(","))
             .env("PYTHONPATH", &src)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
@@ -247,6 +267,7 @@ impl Bridge {
                 max_steps: 0,
                 versions: BTreeMap::new(),
                 stages: Vec::new(),
+                cameras: Vec::new(),
             },
             child,
             stdin,
@@ -263,6 +284,17 @@ impl Bridge {
             serde_json::from_value(v).map_err(|e| bad(format!("the bridge's hello: {e}")))?;
         if !(bridge.hello.step_s > 0.0 && bridge.hello.step_s.is_finite()) {
             return Err(bad(format!("step of {} s", bridge.hello.step_s)));
+        }
+        for cam in &rig.cameras {
+            let drawn = bridge.hello.cameras.iter().find(|c| c.name == cam.name);
+            if let (Some(want), Some(got)) = (cam.vertical_fov_deg, drawn) {
+                if (want - got.fovy_deg).abs() > 1e-6 {
+                    return Err(bad(format!(
+                        "camera {} renders at {}° of vertical field, not the rig's {want}°",
+                        cam.name, got.fovy_deg
+                    )));
+                }
+            }
         }
         Ok(bridge)
     }

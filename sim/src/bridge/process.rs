@@ -21,6 +21,10 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../bridges/scaledp_bridge/protocol.py"),
     ),
     (
+        "cameras.py",
+        include_str!("../../bridges/scaledp_bridge/cameras.py"),
+    ),
+    (
         "metaworld_env.py",
         include_str!("../../bridges/scaledp_bridge/metaworld_env.py"),
     ),
@@ -125,4 +129,23 @@ pub fn python() -> Result<PathBuf> {
              gym-aloha into {VENV}), or point {PYTHON_ENV} at a Python that has them"
         ),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every module of the bridge package is embedded: one left out fails only when the bridge
+    /// imports it, in a process the tests see as "the bridge exited".
+    #[test]
+    fn every_bridge_module_is_embedded() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/bridges/scaledp_bridge");
+        let mut on_disk: Vec<String> = std::fs::read_dir(dir)
+            .unwrap_or_else(|e| panic!("{dir}: {e}"))
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| n.ends_with(".py"))
+            .collect();
+        on_disk.sort();
+        let mut embedded: Vec<String> = super::SOURCES.iter().map(|(n, _)| n.to_string()).collect();
+        embedded.sort();
+        assert_eq!(on_disk, embedded);
+    }
 }
