@@ -51,11 +51,35 @@ pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>
             ));
         }
     }
+    let trained = match trained_rig(cfg) {
+        Some(Ok(r)) => Some(r),
+        _ => None,
+    };
     let have: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
     let mut cams = Vec::new();
     for key in &cfg.model.cameras {
         match camera_index(rig, key) {
-            Some(i) => cams.push(i),
+            Some(i) => {
+                let now = &rig.cameras[i];
+                let then = trained
+                    .as_ref()
+                    .and_then(|t| t.cameras.iter().find(|c| c.name == now.name));
+                if let Some(then) = then.filter(|t| t.vertical_fov_deg != now.vertical_fov_deg) {
+                    let fov = |f: Option<f64>| match f {
+                        Some(d) => format!("{d}°"),
+                        None => "the simulator's own".to_string(),
+                    };
+                    return bad(format!(
+                        "checkpoint {ckpt} learned camera {} at a vertical field of view of {}; \
+                         rig {} renders it at {}: not the pictures it was trained on",
+                        now.name,
+                        fov(then.vertical_fov_deg),
+                        rig.name,
+                        fov(now.vertical_fov_deg)
+                    ));
+                }
+                cams.push(i)
+            }
             None => {
                 return bad(format!(
                     "checkpoint {ckpt} reads camera {key}, which rig {} lacks (it has {have:?})",

@@ -195,6 +195,21 @@ fn a_checkpoint_that_does_not_fit_the_rig_is_one_clear_error() {
         e.contains("trained on rig bimanual_ur5_sim, not franka_sim"),
         "{e}"
     );
+    // The same rig, but its first camera zoomed since training.
+    let mut spec = common::Spec::at_home(&rig);
+    spec.rig = Some(toml::to_string(&rig).unwrap());
+    let mut zoomed = rig.clone();
+    zoomed.cameras[0].vertical_fov_deg = Some(45.0);
+    let ckpt = common::write(&dir.path().join("z"), &spec);
+    let cfg = Policy::load(&ckpt, &Device::Cpu).unwrap().config().clone();
+    let e = Controller::new(&cfg, "z", &zoomed, ControlOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("the simulator's own") && e.contains("45°") && !e.contains('\n'),
+        "{e}"
+    );
+    assert!(Controller::new(&cfg, "z", &rig, ControlOptions::default()).is_ok());
     // No rig named, a camera the rig lacks.
     let mut spec = common::Spec::at_home(&rig);
     spec.rig = None;
