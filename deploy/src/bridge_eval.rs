@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use scaledp_policy::Policy;
 use scaledp_schema::{Rig, RosMessage};
-use scaledp_sim::bridge::{Bridge, Observation};
+use scaledp_sim::bridge::{Bridge, Hello, Observation};
 use scaledp_sim::{messages, ArmCommand};
 
 use crate::controller::{ControlOptions, Controller};
@@ -74,9 +74,9 @@ fn record_commands(rig: &Rig, cmds: &[ArmCommand], t_ns: u64, r: &mut Rollout) -
 
 /// What the simulator adds to a report: its versions, and the stage counts of the episodes
 /// when it names stages.
-fn with_simulator(bridge: &Bridge, mut report: EvalReport) -> EvalReport {
-    report.simulator = Some(bridge.hello().versions.clone());
-    let names = &bridge.hello().stages;
+pub(crate) fn with_simulator(hello: &Hello, mut report: EvalReport) -> EvalReport {
+    report.simulator = Some(hello.versions.clone());
+    let names = &hello.stages;
     if !names.is_empty() {
         let highest: Vec<Option<f64>> = report.episodes.iter().map(|e| e.highest_reward).collect();
         report.stages = stage_counts(names, &highest);
@@ -190,7 +190,7 @@ pub fn run_bridge_eval(
         episodes.push(rep);
     }
     let mut report = with_simulator(
-        &bridge,
+        bridge.hello(),
         summarize(
             &ckpt,
             rig,
@@ -236,7 +236,7 @@ pub fn run_bridge_expert(
         episodes.push(rep);
     }
     let mut report = with_simulator(
-        &bridge,
+        bridge.hello(),
         summarize(
             "(scripted expert)",
             rig,

@@ -176,6 +176,7 @@ pub fn run_bridge_live(
         ep.success = task.time_to_success_s.is_some();
         ep.time_to_success_s = task.time_to_success_s;
         ep.duration_s = task.t_s;
+        ep.highest_reward = task.highest_reward;
         ep.chunks = st.chunks;
         ep.commanded_ticks = st.commanded_ticks;
         ep.clamped_ticks = st.clamped_ticks;
@@ -184,8 +185,10 @@ pub fn run_bridge_live(
         on_episode(&ep);
         episodes.push(ep);
     }
+    let hello = sim.hello().clone();
     sim.stop()?;
-    let mut report = summarize(&ckpt, rig, "live", opts, fps, episodes);
+    let report = summarize(&ckpt, rig, "live", opts, fps, episodes);
+    let mut report = crate::bridge_eval::with_simulator(&hello, report);
     report.inference_ms_p50 = percentile(&p50s, 0.5);
     report.inference_ms_p99 = p99s.iter().copied().reduce(f64::max);
     report.e2e_ms_p50 = percentile(&e2e, 0.5);

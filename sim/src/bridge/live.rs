@@ -83,6 +83,9 @@ pub struct LiveTask {
     /// Simulated seconds per wall-clock second over the last full second (over the run so far
     /// until a second has passed).
     pub real_time_factor: f64,
+    /// The highest reward of the episode so far, for a task whose reward counts stages
+    /// ([`super::Hello::stages`]).
+    pub highest_reward: Option<f64>,
 }
 
 struct Shared {
@@ -100,6 +103,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// A running live bridge.
 pub struct LiveBridge {
+    hello: super::Hello,
     shared: Arc<Shared>,
     thread: Option<JoinHandle<Result<()>>>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
@@ -109,6 +113,7 @@ impl LiveBridge {
     /// Starts the simulator of `opts.rig` and its loop on `session`.
     pub fn spawn(opts: LiveOptions, session: &zenoh::Session) -> Result<Self> {
         let bridge = Bridge::spawn(&opts.rig)?;
+        let hello = bridge.hello().clone();
         let rig = opts.rig.clone();
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
@@ -193,10 +198,16 @@ impl LiveBridge {
                 source,
             })?;
         Ok(LiveBridge {
+            hello,
             shared,
             thread: Some(thread),
             _subscribers: subscribers,
         })
+    }
+
+    /// What the simulator said of itself.
+    pub fn hello(&self) -> &super::Hello {
+        &self.hello
     }
 
     /// Starts the episode of `seed` at the loop's next step.
@@ -279,6 +290,8 @@ fn run(
     let mut episode_ns = sim_ns;
     let mut obs = bridge.reset(seed, true)?;
     let mut success_at = None;
+    let staged = !bridge.hello().stages.is_empty();
+    let mut highest: Option<f64> = None;
     let (mut last_status, mut rtf_mark) = (Instant::now(), (Instant::now(), sim_ns));
     // The last full second's rate, once a second has passed.
     let mut rtf_full: Option<f64> = None;
@@ -291,6 +304,7 @@ fn run(
             *lock(&sh.pending) = vec![ArmCommand::default(); opts.rig.arms.len()];
             obs = bridge.reset(seed, true)?;
             success_at = None;
+            highest = None;
         }
         let stamp = episode_ns + obs.step * dt;
         sim_ns = sim_ns.max(stamp);
@@ -305,6 +319,9 @@ fn run(
             .wait();
         if obs.success && success_at.is_none() {
             success_at = Some(obs.step);
+        }
+        if staged {
+            highest = Some(highest.map_or(obs.reward, |h: f64| h.max(obs.reward)));
         }
         let window_s = rtf_mark.0.elapsed().as_secs_f64();
         let window_rtf = (stamp - rtf_mark.1) as f64 / 1e9 / window_s.max(1e-9);
@@ -323,6 +340,7 @@ fn run(
             time_to_success_s: success_at.map(|k| k as f64 * s),
             done: obs.done,
             real_time_factor: rtf,
+            highest_reward: highest,
         };
         if last_status.elapsed() >= Duration::from_millis(100) {
             last_status = Instant::now();
