@@ -96,6 +96,7 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
         table.contains("| scripted expert | 0/2 | 0/2 | 0/2 | 0/2 |"),
         "0.3 s is too short for any stage: {table}"
     );
+    assert!(table.contains("ACT paper's Table I"), "{table}");
     assert!(res.join("success_by_level.svg").exists());
 
     // The same recordings in TCP space: 6D pose and gripper per arm.

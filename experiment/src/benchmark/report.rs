@@ -140,6 +140,9 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         md.push('\n');
     }
     md.push_str(&stages_table(&tasks, &arms, &get, &l));
+    if let Some(cited) = super::kind::published(&l.results[0].benchmark) {
+        md.push_str(cited);
+    }
     md.push_str(
         "\nMean over each level's tasks (tasks where every arm has a result):\n\n| level | tasks |",
     );
