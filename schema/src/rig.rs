@@ -228,8 +228,10 @@ pub struct Camera {
     /// True when the topic carries `sensor_msgs/CompressedImage`.
     #[serde(default)]
     pub compressed: bool,
-    /// A simulated camera's vertical field of view (degrees), replacing the simulator's own: a
-    /// zoom that spends a small image's pixels on the workspace. Real cameras ignore it.
+    /// A simulated camera's vertical field of view (degrees), replacing the simulator's own: on
+    /// a MuJoCo bridge (MetaWorld, ALOHA) a zoom that spends a small image's pixels on the
+    /// workspace; the built-in cell places its fixed cameras to frame the workspace whatever
+    /// their field, so there it zooms the wrist cameras. Real cameras ignore it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vertical_fov_deg: Option<f64>,
 }

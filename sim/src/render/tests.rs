@@ -240,3 +240,22 @@ fn every_encoding_holds_the_same_picture() {
         }
     }
 }
+
+/// A rig's `vertical_fov_deg` sets the focal length: half the height over the tangent of half
+/// the field.
+#[test]
+fn a_vertical_field_of_view_sets_the_focal_length() {
+    let mut rig = rig();
+    rig.cameras[1].vertical_fov_deg = Some(40.0);
+    let scene = Scene::new(&rig);
+    let zoomed = View::for_camera(&scene, &rig.cameras[1], 1);
+    let want = 60.0 / 20f64.to_radians().tan();
+    assert!(
+        (zoomed.f_px - want).abs() < 1e-9,
+        "{} vs {want}",
+        zoomed.f_px
+    );
+    rig.cameras[1].vertical_fov_deg = None;
+    let own = View::for_camera(&scene, &rig.cameras[1], 1);
+    assert!(own.f_px < zoomed.f_px, "{} vs {}", own.f_px, zoomed.f_px);
+}
