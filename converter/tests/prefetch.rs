@@ -1,6 +1,7 @@
 //! Frames encoded during the one read of an MCAP recording (picked ahead of alignment) give the
 //! same episode as frames fetched by a second read, including when the guess is wrong, and a
-//! recording whose chunks end with frames (left compressed until picked) reads whole.
+//! recording whose chunks end with frames (left compressed until picked) reads whole. A
+//! recording whose camera was zoomed does not join a dataset of the old pictures.
 
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
@@ -303,4 +304,43 @@ fn frames_read_again_are_counted_like_the_first_read() {
             encode_message(&path, topic, image, *log, Serialization::Cdr, data, &spec).unwrap();
         assert_eq!(got[&(topic.to_string(), k)].bytes, want.bytes, "frame {k}");
     }
+}
+
+/// A recording whose camera was zoomed (another `vertical_fov_deg` in its rig) does not join a
+/// dataset of pictures at the old field of view: it fails alone, naming both fields, and the
+/// dataset keeps its episode.
+#[test]
+fn a_recording_at_another_field_of_view_does_not_join_the_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = Rig::builtin("franka_2zed").unwrap();
+    let mut zoomed = rig.clone();
+    zoomed.cameras[0].vertical_fov_deg = Some(45.0);
+    let (a, b) = (dir.path().join("a.mcap"), dir.path().join("b.mcap"));
+    record(&a, &rig);
+    record(&b, &zoomed);
+    let out = dir.path().join("dataset");
+    let opts = scaledp_converter::JobOptions::default().jobs(1).convert(
+        ConvertOptions::default()
+            .size(160, 120)
+            .max_invalid_fraction(0.2),
+    );
+    let first = scaledp_converter::run(&[a], &out, &opts, &|_| {}).unwrap();
+    assert!(
+        matches!(first[0].1, scaledp_converter::InputResult::Converted(_)),
+        "{:?}",
+        first[0].1
+    );
+    let second = scaledp_converter::run(&[b], &out, &opts, &|_| {}).unwrap();
+    match &second[0].1 {
+        scaledp_converter::InputResult::Failed(e) => {
+            let e = e.to_string();
+            assert!(
+                e.contains("b.mcap") && e.contains("45°") && e.contains("the simulator's own"),
+                "{e}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    let info = std::fs::read_to_string(out.join("meta/info.json")).unwrap();
+    assert!(info.contains("\"total_episodes\": 1"), "{info}");
 }

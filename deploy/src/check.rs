@@ -2,6 +2,7 @@
 //! the checkpoint's side and the rig's.
 
 use scaledp_policy::CheckpointConfig;
+use scaledp_schema::fov_label;
 use scaledp_schema::rig::Rig;
 
 use crate::error::{Error, Result};
@@ -12,34 +13,63 @@ pub fn camera_index(rig: &Rig, key: &str) -> Option<usize> {
     rig.cameras.iter().position(|c| c.name == name)
 }
 
-/// The rig a checkpoint was trained on: its config's `rig` holds the dataset's rig, as the
-/// rig's TOML (what `scaledp convert` stores) or as a name.
-pub fn trained_rig(cfg: &CheckpointConfig) -> Option<std::result::Result<Rig, String>> {
-    let text = cfg.rig.as_deref()?.trim();
-    if text.is_empty() {
-        return None;
-    }
-    if text.contains('\n') || text.contains('=') {
-        return Some(
-            Rig::parse(text, std::path::Path::new("checkpoint config.json"))
-                .map_err(|e| e.to_string()),
-        );
-    }
-    Some(Err(text.to_string()))
+/// The rig a checkpoint's config stores (the dataset's): its TOML, as `scaledp convert` stores
+/// it, or a name.
+enum Stored<'a> {
+    Toml(&'a str),
+    Name(&'a str),
 }
 
-/// The name of the rig a checkpoint was trained on, if it says.
+fn stored(cfg: &CheckpointConfig) -> Option<Stored<'_>> {
+    let text = cfg.rig.as_deref()?.trim();
+    if text.is_empty() {
+        None
+    } else if text.contains('\n') || text.contains('=') {
+        Some(Stored::Toml(text))
+    } else {
+        Some(Stored::Name(text))
+    }
+}
+
+/// The rig a checkpoint was trained on: the TOML its config stores, or the shipped rig its
+/// config names; `None` when it names none. A stored rig that does not load is one line naming
+/// the checkpoint.
+pub fn trained_rig(cfg: &CheckpointConfig, ckpt: &str) -> Result<Option<Rig>> {
+    let bad = |e: scaledp_schema::Error| {
+        Error::Incompatible(format!(
+            "checkpoint {ckpt}: the rig it was trained on does not load: {e}"
+        ))
+    };
+    match stored(cfg) {
+        None => Ok(None),
+        Some(Stored::Toml(t)) => {
+            Rig::parse(t, std::path::Path::new(&format!("{ckpt}/config.json")))
+                .map(Some)
+                .map_err(bad)
+        }
+        Some(Stored::Name(n)) => Rig::load_or_builtin(n).map(Some).map_err(bad),
+    }
+}
+
+/// The name of the rig a checkpoint was trained on, if it says (read leniently: a stored rig
+/// with fields this build does not know still has a name).
 pub fn trained_rig_name(cfg: &CheckpointConfig) -> Option<String> {
-    trained_rig(cfg).map(|r| match r {
-        Ok(rig) => rig.name,
-        Err(name) => name,
-    })
+    match stored(cfg)? {
+        Stored::Name(n) => Some(n.to_string()),
+        Stored::Toml(t) => toml::from_str::<toml::Value>(t)
+            .ok()?
+            .get("name")?
+            .as_str()
+            .map(str::to_string),
+    }
 }
 
 /// Checks that `cfg` (a checkpoint's config, `ckpt` its name for messages) can drive `rig`:
 /// the rig it was trained for (when it names one), every camera it reads, its state and action
 /// names (the converter's, in the checkpoint's action space), and a command topic on every arm
-/// (a `PoseStamped` or a leader's `JointState`: [`crate::controller`] converts between the two). Returns the rig camera index of each checkpoint camera.
+/// (a `PoseStamped` or a leader's `JointState`: [`crate::controller`] converts between the two),
+/// and each camera's field of view against the pictures it learned from. Returns the rig camera
+/// index of each checkpoint camera.
 pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>> {
     let bad = |m: String| Err(Error::Incompatible(m));
     if let Some(trained) = trained_rig_name(cfg) {
@@ -51,41 +81,37 @@ pub fn check(cfg: &CheckpointConfig, ckpt: &str, rig: &Rig) -> Result<Vec<usize>
             ));
         }
     }
-    let trained = match trained_rig(cfg) {
-        Some(Ok(r)) => Some(r),
+    // The pictures it learned from: a stored rig's cameras at their fields of view.
+    let trained = match stored(cfg) {
+        Some(Stored::Toml(_)) => trained_rig(cfg, ckpt)?,
         _ => None,
     };
     let have: Vec<&str> = rig.cameras.iter().map(|c| c.name.as_str()).collect();
     let mut cams = Vec::new();
     for key in &cfg.model.cameras {
         match camera_index(rig, key) {
-            Some(i) => {
-                let now = &rig.cameras[i];
-                let then = trained
-                    .as_ref()
-                    .and_then(|t| t.cameras.iter().find(|c| c.name == now.name));
-                if let Some(then) = then.filter(|t| t.vertical_fov_deg != now.vertical_fov_deg) {
-                    let fov = |f: Option<f64>| match f {
-                        Some(d) => format!("{d}°"),
-                        None => "the simulator's own".to_string(),
-                    };
-                    return bad(format!(
-                        "checkpoint {ckpt} learned camera {} at a vertical field of view of {}; \
-                         rig {} renders it at {}: not the pictures it was trained on",
-                        now.name,
-                        fov(then.vertical_fov_deg),
-                        rig.name,
-                        fov(now.vertical_fov_deg)
-                    ));
-                }
-                cams.push(i)
-            }
+            Some(i) => cams.push(i),
             None => {
                 return bad(format!(
                     "checkpoint {ckpt} reads camera {key}, which rig {} lacks (it has {have:?})",
                     rig.name
                 ))
             }
+        }
+    }
+    for now in cams.iter().map(|&i| &rig.cameras[i]) {
+        let then = trained
+            .as_ref()
+            .and_then(|t| t.cameras.iter().find(|c| c.name == now.name));
+        if let Some(then) = then.filter(|t| t.vertical_fov_deg != now.vertical_fov_deg) {
+            return bad(format!(
+                "checkpoint {ckpt} learned camera {} at a vertical field of view of {}; rig {} \
+                 renders it at {} (eval without --rig runs the checkpoint's own rig)",
+                now.name,
+                fov_label(then.vertical_fov_deg),
+                rig.name,
+                fov_label(now.vertical_fov_deg)
+            ));
         }
     }
     let names = scaledp_converter::state_names(rig, cfg.action_space);

@@ -210,6 +210,17 @@ fn a_checkpoint_that_does_not_fit_the_rig_is_one_clear_error() {
         "{e}"
     );
     assert!(Controller::new(&cfg, "z", &rig, ControlOptions::default()).is_ok());
+    // And the other way: trained zoomed, run at the simulator's own field.
+    spec.rig = Some(toml::to_string(&zoomed).unwrap());
+    let ckpt = common::write(&dir.path().join("w"), &spec);
+    let cfg = Policy::load(&ckpt, &Device::Cpu).unwrap().config().clone();
+    let e = Controller::new(&cfg, "w", &rig, ControlOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("at a vertical field of view of 45°") && e.contains("the simulator's own"),
+        "{e}"
+    );
     // No rig named, a camera the rig lacks.
     let mut spec = common::Spec::at_home(&rig);
     spec.rig = None;

@@ -140,10 +140,10 @@ pub fn expert(
 
 /// The rig a checkpoint was trained on.
 pub fn trained_rig(policy: &Policy) -> Result<Rig> {
-    match scaledp_deploy::check::trained_rig(policy.config()) {
-        Some(Ok(rig)) => Ok(rig),
-        Some(Err(name)) => Ok(Rig::load_or_builtin(&name)?),
-        None => anyhow::bail!("checkpoint {} names no rig", policy.dir().display()),
+    let ckpt = policy.dir().display().to_string();
+    match scaledp_deploy::check::trained_rig(policy.config(), &ckpt)? {
+        Some(rig) => Ok(rig),
+        None => anyhow::bail!("checkpoint {ckpt} names no rig"),
     }
 }
 

@@ -8,6 +8,7 @@
 //! A data file is closed once it reaches the size target; the next episode starts a new one.
 
 mod columns;
+mod layout;
 mod meta;
 mod repair;
 mod videos;
@@ -145,56 +146,6 @@ impl Dataset {
     /// True when an input with this BLAKE3 hash is already in the dataset.
     pub fn contains(&self, source_hash: &str) -> bool {
         self.episodes().iter().any(|e| e.source_hash == source_hash)
-    }
-
-    fn check_layout(&self, ep: &Episode) -> Result<()> {
-        let Some(s) = &self.sidecar else {
-            return Ok(());
-        };
-        let cams: Vec<String> = ep.cameras.iter().map(|c| c.name.clone()).collect();
-        let mismatch = if s.cameras != cams {
-            Some(format!("cameras {cams:?}, the dataset has {:?}", s.cameras))
-        } else if s.action_space != ep.action_space {
-            Some(format!(
-                "{} state and action, the dataset's are {} (convert with --action {})",
-                ep.action_space, s.action_space, s.action_space
-            ))
-        } else if s.state_names != ep.state_names {
-            Some(format!(
-                "state {:?}, the dataset has {:?}",
-                ep.state_names, s.state_names
-            ))
-        } else if s.joint_names != ep.joint_names {
-            Some(format!(
-                "joints {:?}, the dataset has {:?}",
-                ep.joint_names, s.joint_names
-            ))
-        } else if (s.fps - ep.fps).abs() > 1e-9 || s.image_size != ep.image_size {
-            Some(format!(
-                "{} fps {:?} images, the dataset has {} fps {:?}",
-                ep.fps, ep.image_size, s.fps, s.image_size
-            ))
-        } else if s.video != ep.video.as_ref().map(VideoFormat::of) {
-            Some(format!(
-                "cameras as {}, the dataset has them as {}",
-                stored_as(ep.video.as_ref().map(VideoFormat::of).as_ref()),
-                stored_as(s.video.as_ref())
-            ))
-        } else if s.video.is_none() && s.jpeg_quality.is_some_and(|q| q != ep.jpeg_quality) {
-            Some(format!(
-                "JPEG quality {}, the dataset has {:?}",
-                ep.jpeg_quality, s.jpeg_quality
-            ))
-        } else {
-            None
-        };
-        match mismatch {
-            Some(m) => Err(Error::Rejected {
-                path: ep.source.clone(),
-                reason: format!("does not fit the dataset: {m}"),
-            }),
-            None => Ok(()),
-        }
     }
 
     /// An episode's arrays must have the shapes its names announce: a bug upstream (or an
@@ -497,10 +448,6 @@ impl Dataset {
 }
 
 /// How cameras are stored, for a mismatch message.
-fn stored_as(v: Option<&VideoFormat>) -> String {
-    v.map_or("JPEG images".into(), |v| format!("{} video", v.codec))
-}
-
 /// Appends an episode's streams to the open video file (a new one when none is open or the
 /// streams do not fit it) and stages its MP4s; the episode's span and the largest MP4's size.
 fn stage_video(

@@ -175,6 +175,33 @@ fn prepare(rig: &Rig, dir: &Path, demos: u64, space: ActionSpace) -> Result<(Pat
     Ok((ds, ok))
 }
 
+/// Refuses a dataset recorded with a camera at another field of view than `rig`'s (made with
+/// an earlier rig file): its arms would train on other pictures than evaluation shows them.
+fn same_pictures(rig: &Rig, ds: &Path, dir: &Path) -> Result<()> {
+    let info = ds.join("meta/info.json");
+    let text =
+        std::fs::read_to_string(&info).with_context(|| format!("reading {}", info.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", info.display()))?;
+    let Some(stored) = v["scaledp"]["rig"].as_str().filter(|t| t.contains('=')) else {
+        return Ok(());
+    };
+    let then = Rig::parse(stored, &info)?;
+    if let Some(c) = then.fov_change(rig) {
+        bail!(
+            "{}: recorded with camera {} at a vertical field of view of {}, and rig {} has {}: \
+             move {} aside to collect and train at the rig's",
+            ds.display(),
+            c.camera,
+            scaledp_schema::fov_label(c.from),
+            rig.name,
+            scaledp_schema::fov_label(c.to),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
 /// The revision a run was trained at: written beside it when its training starts.
 fn train_revision(run: &Path) -> Result<String> {
     let path = run.join("REVISION");
@@ -218,6 +245,7 @@ pub(crate) fn run(
         let task_dir = a.runs.join(&st.name).join(task);
         eprintln!("== task {task} ({level})");
         let (dataset, demos) = prepare(&rig, &task_dir, demos, bench.action_space())?;
+        same_pictures(&rig, &dataset, &task_dir)?;
         let dataset = dataset.display().to_string();
         for &arm in &st.arms {
             let path = result_path(&results_dir, task, arm.name);

@@ -1,5 +1,5 @@
 """``python -m scaledp_bridge --env metaworld --task assembly --cameras corner2,behindGripper
---size 84x84``: one simulator behind the bridge protocol on stdin/stdout (what ``scaledp sim``,
+--size 84x84 [--fovy corner2=45]``: one simulator behind the bridge protocol on stdin/stdout (what ``scaledp sim``,
 ``collect`` and ``eval`` start for a ``metaworld/<task>`` or ``aloha/<task>`` rig)."""
 
 from __future__ import annotations

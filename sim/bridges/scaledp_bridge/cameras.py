@@ -12,9 +12,12 @@ def parse_fovy(arg: str) -> Dict[str, float]:
     out = {}
     for item in filter(None, arg.split(",")):
         name, sep, deg = item.partition("=")
-        if not sep:
-            raise ValueError(f"--fovy {item!r}: expected camera=degrees")
-        out[name] = float(deg)
+        try:
+            if not sep:
+                raise ValueError
+            out[name] = float(deg)
+        except ValueError:
+            raise ValueError(f"--fovy {item!r}: expected camera=degrees") from None
     return out
 
 

@@ -287,6 +287,12 @@ impl Bridge {
         }
         for cam in &rig.cameras {
             let drawn = bridge.hello.cameras.iter().find(|c| c.name == cam.name);
+            if let (Some(_), None) = (cam.vertical_fov_deg, drawn) {
+                return Err(bad(format!(
+                    "camera {} is zoomed by the rig, and the bridge does not say it renders it",
+                    cam.name
+                )));
+            }
             if let (Some(want), Some(got)) = (cam.vertical_fov_deg, drawn) {
                 if (want - got.fovy_deg).abs() > 1e-6 {
                     return Err(bad(format!(

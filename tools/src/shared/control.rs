@@ -81,12 +81,9 @@ pub fn rig_for(policy: &Policy, rig: Option<&str>) -> Result<Rig> {
     if let Some(r) = rig {
         return Ok(Rig::load_or_builtin(r)?);
     }
-    match scaledp_deploy::check::trained_rig(policy.config()) {
-        Some(Ok(rig)) => Ok(rig),
-        Some(Err(name)) => Ok(Rig::load_or_builtin(&name)?),
-        None => bail!(
-            "checkpoint {} names no rig: pass --rig",
-            policy.dir().display()
-        ),
+    let ckpt = policy.dir().display().to_string();
+    match scaledp_deploy::check::trained_rig(policy.config(), &ckpt)? {
+        Some(rig) => Ok(rig),
+        None => bail!("checkpoint {ckpt} names no rig: pass --rig"),
     }
 }
