@@ -1,5 +1,6 @@
 //! `kill -9` a recording `scaledp record` process mid-episode, then `scaledp recover`: the file
-//! opens in ROS 2 tools and at most the last second of messages is gone.
+//! opens in ROS 2 tools and at most the last second of messages is gone. And a command whose
+//! stdout reader has gone (`scaledp … | head`) ends quietly.
 
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
@@ -92,4 +93,51 @@ fn kill_9_then_recover_loses_at_most_one_second() {
             topic.topic
         );
     }
+}
+
+/// `scaledp recover … | head -0`: stdout's reader gone before the summary line, the command
+/// still finishes its work and exits 0, with no panic on stderr.
+#[test]
+fn a_closed_stdout_ends_a_command_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.mcap");
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(&input).unwrap(),
+    ))
+    .unwrap();
+    let schema = w
+        .add_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        .unwrap();
+    let ch = w
+        .add_channel(schema, "/chatter", "cdr", &Default::default())
+        .unwrap();
+    for k in 0..10u64 {
+        let header = mcap::records::MessageHeader {
+            channel_id: ch,
+            sequence: k as u32,
+            log_time: 1_000 + k,
+            publish_time: 1_000 + k,
+        };
+        w.write_to_known_channel(&header, &[0, 1, 0, 0, 1, 0, 0, 0, 0])
+            .unwrap();
+    }
+    w.finish().unwrap();
+    drop(w);
+    let output = dir.path().join("out.mcap");
+    let mut child = Command::new(scaledp_bin())
+        .arg("recover")
+        .arg(&input)
+        .arg("--output")
+        .arg(&output)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reader goes away at once: the summary line meets a closed pipe.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(output.exists());
 }

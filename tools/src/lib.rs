@@ -13,6 +13,7 @@ use clap::Parser;
 
 /// Parses the command line, runs the command, reports errors, and returns the exit code.
 pub fn run() -> std::process::ExitCode {
+    ui::quiet_on_closed_stdout();
     let args = cli::Cli::parse();
     ui::init_logging(args.verbose, args.quiet);
     match commands::dispatch(args.command) {

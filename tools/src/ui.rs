@@ -22,6 +22,26 @@ pub fn init_logging(verbose: u8, quiet: bool) {
         .try_init();
 }
 
+/// `scaledp … | head`: when the reader of stdout has gone, the command ends quietly with
+/// status 0 (as ripgrep does) instead of panicking in `println!`. Only stdout is concerned: the
+/// Rust runtime ignores SIGPIPE, so a closed socket or a dead simulator's pipe stays an error
+/// the command reports (restoring SIGPIPE's default would kill the process there instead).
+pub fn quiet_on_closed_stdout() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let p = info.payload();
+        let msg = p
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| p.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.starts_with("failed printing to stdout") && msg.contains("Broken pipe") {
+            std::process::exit(0);
+        }
+        default(info)
+    }));
+}
+
 /// Short labels for a rig's topics, in `Rig::topics` order: camera names, arm names, `<arm>_grip`.
 pub fn topic_labels(rig: &Rig) -> Vec<String> {
     let mut out: Vec<String> = rig.cameras.iter().map(|c| c.name.clone()).collect();
