@@ -22,6 +22,18 @@ pub struct Arm {
 }
 
 impl Arm {
+    /// The paper's claim that holding this arm against the recipe's (ScaleDP-Ti, non-causal)
+    /// puts to the test; `None` for the recipe's own arm.
+    pub fn claim(&self) -> Option<&'static str> {
+        match self.name {
+            "ti-causal" => Some("non-causal attention above causal (Ti above this arm)"),
+            "s" => Some("a larger ScaleDP does better (this arm above Ti)"),
+            "dp-t" => Some("ScaleDP-Ti above DP-T, the paper's baseline"),
+            "dp-t-l12" | "dp-t-l14" => Some("ScaleDP-Ti above a deeper DP-T"),
+            _ => None,
+        }
+    }
+
     /// The recipe `base` with this arm's denoiser.
     pub fn options(&self, base: TrainOptions) -> TrainOptions {
         let o = base

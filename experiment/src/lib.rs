@@ -20,6 +20,7 @@ mod evaluate;
 mod grad_scale;
 mod plot;
 mod results;
+mod significance;
 mod train;
 
 use std::sync::atomic::AtomicBool;

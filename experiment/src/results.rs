@@ -5,6 +5,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::significance::{self, Pairing, RECIPE};
+
 /// One evaluation, condensed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvalFigures {
@@ -246,6 +248,19 @@ pub fn table(arms: &[ArmResult]) -> String {
             "\n| arm | control (test seeds) | success (95 % Wilson) | |\n|---|---|---|---|\n",
         );
         s.push_str(&controls);
+    }
+    if let Some(recipe) = arms.iter().find(|a| a.arm == RECIPE) {
+        let pairings: Vec<Pairing> = arms
+            .iter()
+            .filter(|a| a.arm != RECIPE)
+            .map(|a| Pairing {
+                task: "",
+                arm: &a.arm,
+                recipe: &recipe.test,
+                other: &a.test,
+            })
+            .collect();
+        s.push_str(&significance::table(&pairings, false));
     }
     s
 }

@@ -13,6 +13,7 @@ use scaledp_schema::benchmarks::Difficulty;
 use super::{TaskControls, TaskResult};
 use crate::arms::ARMS;
 use crate::results::EvalFigures;
+use crate::significance::{self, Pairing, RECIPE};
 
 /// Whether `dir` holds a benchmark's results (files named `<task>--<arm>.json`).
 pub(crate) fn is_benchmark(dir: &Path) -> bool {
@@ -139,6 +140,24 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         }
         md.push('\n');
     }
+    let pairings: Vec<Pairing> = tasks
+        .iter()
+        .filter_map(|(_, task)| get(task, RECIPE).map(|r| (task, r)))
+        .flat_map(|(task, recipe)| {
+            arms.iter()
+                .filter(|a| **a != RECIPE)
+                .filter_map(move |a| {
+                    get(task, a).map(|o| Pairing {
+                        task,
+                        arm: a,
+                        recipe: &recipe.test,
+                        other: &o.test,
+                    })
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    md.push_str(&significance::table(&pairings, true));
     md.push_str(&stages_table(&tasks, &arms, &get, &l));
     if let Some(cited) = super::kind::published(&l.results[0].benchmark) {
         md.push_str(cited);
