@@ -67,6 +67,11 @@ pub struct CompareArgs {
     /// cpu-aloha].
     #[arg(long)]
     pub preset: Option<String>,
+    /// Training seed (weights, data order, crops, diffusion noise) instead of 0: a replicate of
+    /// each arm beside the seed-0 runs (benchmarks only), as `<task>--<arm>--seed<N>.json` and
+    /// run directory `<arm>-seed<N>`; the table shows every seed and pairs arms by seed.
+    #[arg(long, default_value_t = 0)]
+    pub train_seed: u64,
     /// Optimizer steps instead of the preset's.
     #[arg(long)]
     pub steps: Option<u64>,

@@ -122,6 +122,12 @@ fn recipe(a: &CompareArgs, s: &Settings) -> Result<TrainOptions> {
     if let Some(b) = a.batch_size {
         o = o.batch_size(b);
     }
+    if a.train_seed != 0 {
+        if a.benchmark.is_none() {
+            bail!("--train-seed: replicates are kept for --benchmark comparisons only");
+        }
+        o = o.seed(a.train_seed);
+    }
     if o.get_checkpoint_every() == 0 {
         bail!("the experiment evaluates every checkpoint: --checkpoint-every must be at least 1");
     }
@@ -327,8 +333,12 @@ fn train_command(
     let layers = arm
         .layers
         .map_or(String::new(), |l| format!(" --layers {l}"));
+    let seed = match opts.get_seed() {
+        0 => String::new(),
+        s => format!(" --seed {s}"),
+    };
     format!(
-        "scaledp train {dataset} --preset {preset} --model {model}{layers} --attention {} --steps {} --checkpoint-every {} --batch-size {} --out {}",
+        "scaledp train {dataset} --preset {preset} --model {model}{layers} --attention {} --steps {} --checkpoint-every {} --batch-size {}{seed} --out {}",
         arm.attention,
         opts.get_steps(),
         opts.get_checkpoint_every(),

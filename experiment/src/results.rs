@@ -256,6 +256,7 @@ pub fn table(arms: &[ArmResult]) -> String {
             .map(|a| Pairing {
                 task: "",
                 arm: &a.arm,
+                seed: 0,
                 recipe: &recipe.test,
                 other: &a.test,
             })

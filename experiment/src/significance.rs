@@ -2,8 +2,9 @@
 //! seeds: Fisher's exact test on the 2×2 table of successes and failures — the test for two
 //! small binomial samples — with the paper's claim each pairing puts to the test.
 //!
-//! Each arm is one training run, so p speaks to the evaluation's sampling noise only, not to
-//! the spread between training seeds; the tables say so.
+//! Each pairing is one training run against another, so p speaks to the evaluation's sampling
+//! noise only, not to the spread between training seeds (replicates, `--train-seed`, show that);
+//! the tables say so.
 
 use crate::arms::arm;
 use crate::results::EvalFigures;
@@ -33,6 +34,8 @@ pub(crate) fn fisher_two_sided(a: &EvalFigures, b: &EvalFigures) -> Option<f64> 
 pub(crate) struct Pairing<'a> {
     pub task: &'a str,
     pub arm: &'a str,
+    /// Both arms' training seed.
+    pub seed: u64,
     pub recipe: &'a EvalFigures,
     pub other: &'a EvalFigures,
 }
@@ -53,9 +56,9 @@ pub(crate) fn table(pairings: &[Pairing], with_task: bool) -> String {
         return String::new();
     }
     let mut md = format!(
-        "\nEach arm against ScaleDP-Ti (`{RECIPE}`) on the same test seeds: Fisher's exact test, \
-         two-sided. One training run per arm, so p measures the evaluation's sampling noise, not \
-         the spread between training seeds.\n\n|{} arm | the paper's claim it tests | `{RECIPE}` | \
+        "\nEach arm against ScaleDP-Ti (`{RECIPE}`) on the same test seeds (each pair trained from the same seed): Fisher's exact test, \
+         two-sided. Each p holds one training run against another, so it measures the \
+         evaluation's sampling noise, not the spread between training seeds.\n\n|{} arm | the paper's claim it tests | `{RECIPE}` | \
          arm | arm − `{RECIPE}` | p |\n|{}---|---|---|---|---|---|\n",
         if with_task { " task |" } else { "" },
         if with_task { "---|" } else { "" },
@@ -64,13 +67,18 @@ pub(crate) fn table(pairings: &[Pairing], with_task: bool) -> String {
         let claim = arm(p.arm).and_then(|a| a.claim()).unwrap_or("–");
         let diff = 100.0 * (p.other.success_rate - p.recipe.success_rate);
         md.push_str(&format!(
-            "|{} {} | {claim} | {}/{} | {}/{} | {diff:+.0} points | {} |\n",
+            "|{} {}{} | {claim} | {}/{} | {}/{} | {diff:+.0} points | {} |\n",
             if with_task {
                 format!(" {} |", p.task)
             } else {
                 String::new()
             },
             p.arm,
+            if p.seed == 0 {
+                String::new()
+            } else {
+                format!(" (seed {})", p.seed)
+            },
             p.recipe.successes,
             p.recipe.episodes,
             p.other.successes,
@@ -136,12 +144,14 @@ mod tests {
                 Pairing {
                     task: "assembly",
                     arm: "dp-t",
+                    seed: 0,
                     recipe: &ti,
                     other: &dpt,
                 },
                 Pairing {
                     task: "assembly",
                     arm: "ti-causal",
+                    seed: 1,
                     recipe: &ti,
                     other: &causal,
                 },

@@ -8,6 +8,7 @@
 //! plot are rebuilt from the files that are there.
 
 mod kind;
+mod replicates;
 mod report;
 
 use std::path::{Path, PathBuf};
@@ -39,6 +40,9 @@ pub struct TaskResult {
     pub level: String,
     /// The arm (`ti`, `dp-t`).
     pub arm: String,
+    /// Its training seed (0 unless `--train-seed`: a replicate).
+    #[serde(default)]
+    pub train_seed: u64,
     /// What it is.
     pub what: String,
     /// Test-seed success rate of the last checkpoint (0–1): the reported figure.
@@ -94,9 +98,20 @@ pub struct TaskControls {
     pub provenance: Provenance,
 }
 
-/// The file of (task, arm).
-fn result_path(dir: &Path, task: &str, arm: &str) -> PathBuf {
-    dir.join(format!("{task}--{arm}.json"))
+/// The file of (task, arm) trained from `seed`.
+fn result_path(dir: &Path, task: &str, arm: &str, seed: u64) -> PathBuf {
+    match seed {
+        0 => dir.join(format!("{task}--{arm}.json")),
+        s => dir.join(format!("{task}--{arm}--seed{s}.json")),
+    }
+}
+
+/// The run directory of an arm trained from `seed`.
+fn run_dir(task_dir: &Path, arm: &str, seed: u64) -> PathBuf {
+    match seed {
+        0 => task_dir.join(arm),
+        s => task_dir.join(format!("{arm}-seed{s}")),
+    }
 }
 
 /// Successful episodes listed in a `collect.jsonl`, and the next unused seed.
@@ -248,13 +263,21 @@ pub(crate) fn run(
         same_pictures(&rig, &dataset, &task_dir)?;
         let dataset = dataset.display().to_string();
         for &arm in &st.arms {
-            let path = result_path(&results_dir, task, arm.name);
+            let path = result_path(&results_dir, task, arm.name, a.train_seed);
             if path.exists() {
                 continue;
             }
-            eprintln!("== {task}: arm {}: {}", arm.name, arm.what);
+            eprintln!(
+                "== {task}: arm {}{}: {}",
+                arm.name,
+                match a.train_seed {
+                    0 => String::new(),
+                    s => format!(" (training seed {s})"),
+                },
+                arm.what
+            );
             let opts = arm.options(base.clone());
-            let run = task_dir.join(arm.name);
+            let run = run_dir(&task_dir, arm.name, a.train_seed);
             let revision = train_revision(&run)?;
             let trained = train::train(&dataset, &run, opts.clone(), stop)?;
             if trained.interrupted {
@@ -284,6 +307,7 @@ pub(crate) fn run(
                 task: task.clone(),
                 level: level.into(),
                 arm: arm.name.into(),
+                train_seed: a.train_seed,
                 what: arm.what.into(),
                 test_success_rate: figures.success_rate,
                 test_seeds: (0..a.test_episodes).map(|i| test.seed + i).collect(),
@@ -316,7 +340,7 @@ pub(crate) fn run(
             );
             rebuild(&results_dir)?;
         }
-        if !a.no_controls {
+        if !a.no_controls && a.train_seed == 0 {
             if let Some(&first) = st.arms.first() {
                 controls(a, &rig, task, level, first, &task_dir, &results_dir, &plan)?;
             }
@@ -368,8 +392,12 @@ fn controls(
 
 /// The command line that reproduces one (task, arm).
 fn command(a: &CompareArgs, st: &Settings, bench: Benchmark, task: &str, arm: Arm) -> String {
+    let seed = match a.train_seed {
+        0 => String::new(),
+        s => format!(" --train-seed {s}"),
+    };
     format!(
-        "scaledp experiment compare --benchmark {} --tasks {task} --arms {} --name {} --preset {} --demos {} --test-episodes {} --controls-episodes {} --max-seconds {} --action-steps {}",
+        "scaledp experiment compare --benchmark {} --tasks {task} --arms {} --name {} --preset {} --demos {} --test-episodes {} --controls-episodes {} --max-seconds {} --action-steps {}{seed}",
         bench.name(), arm.name, st.name, st.preset, a.demos.unwrap_or(bench.demos()), a.test_episodes, a.controls_episodes, a.max_seconds, st.action_steps
     )
 }

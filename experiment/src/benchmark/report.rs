@@ -10,10 +10,11 @@ use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 use scaledp_schema::benchmarks::Difficulty;
 
+use super::replicates::{cell, pairings, replicates, seed_suffix};
 use super::{TaskControls, TaskResult};
 use crate::arms::ARMS;
 use crate::results::EvalFigures;
-use crate::significance::{self, Pairing, RECIPE};
+use crate::significance;
 
 /// Whether `dir` holds a benchmark's results (files named `<task>--<arm>.json`).
 pub(crate) fn is_benchmark(dir: &Path) -> bool {
@@ -60,7 +61,7 @@ fn load(dir: &Path) -> Result<Loaded> {
 /// A task's level: MetaWorld's difficulty levels in their order, any other label (ALOHA's
 /// `bimanual`) after them.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
-struct Level {
+pub(super) struct Level {
     rank: usize,
     label: String,
 }
@@ -84,7 +85,7 @@ fn arms_of(results: &[TaskResult]) -> Vec<&'static str> {
         .collect()
 }
 
-fn pct(f: &EvalFigures) -> String {
+pub(super) fn pct(f: &EvalFigures) -> String {
     format!(
         "{:.0} % ({}/{}, {:.0}–{:.0})",
         100.0 * f.success_rate,
@@ -109,7 +110,6 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         .collect();
     tasks.sort();
     tasks.dedup();
-    let get = |task: &str, arm: &str| l.results.iter().find(|r| r.task == task && r.arm == arm);
     let mut md = String::from(
         "# Results\n\nRebuilt by `scaledp experiment report` from the files beside it: test-seed \
          success of each arm's last checkpoint (seeds 2 000 000 …, 95 % Wilson interval), and the \
@@ -125,10 +125,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     for (level, task) in &tasks {
         md.push_str(&format!("| {} | {task} |", level.label));
         for a in &arms {
-            md.push_str(&format!(
-                " {} |",
-                get(task, a).map_or("–".into(), |r| pct(&r.test))
-            ));
+            md.push_str(&format!(" {} |", cell(&replicates(&l.results, task, a))));
         }
         let c = l.controls.get(task).map(|c| &c.controls);
         for f in [
@@ -140,25 +137,9 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         }
         md.push('\n');
     }
-    let pairings: Vec<Pairing> = tasks
-        .iter()
-        .filter_map(|(_, task)| get(task, RECIPE).map(|r| (task, r)))
-        .flat_map(|(task, recipe)| {
-            arms.iter()
-                .filter(|a| **a != RECIPE)
-                .filter_map(move |a| {
-                    get(task, a).map(|o| Pairing {
-                        task,
-                        arm: a,
-                        recipe: &recipe.test,
-                        other: &o.test,
-                    })
-                })
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let pairings = pairings(&tasks, &arms, &l.results);
     md.push_str(&significance::table(&pairings, true));
-    md.push_str(&stages_table(&tasks, &arms, &get, &l));
+    md.push_str(&stages_table(&tasks, &arms, &l));
     if let Some(cited) = super::kind::published(&l.results[0].benchmark) {
         md.push_str(cited);
     }
@@ -171,7 +152,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     md.push_str("\n|---|---|");
     md.push_str(&"---|".repeat(arms.len()));
     md.push('\n');
-    for (level, means) in level_means(&tasks, &arms, &get) {
+    for (level, means) in level_means(&tasks, &arms, &l.results) {
         let (n, values) = means;
         md.push_str(&format!("| {} | {n} |", level.label));
         for v in values {
@@ -182,10 +163,11 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     md.push_str("\n| task | arm | steps | training | s/step | inference p50 / p99 | trained at | scored at | machine |\n|---|---|---|---|---|---|---|---|---|\n");
     for (_, task) in &tasks {
         for a in &arms {
-            if let Some(r) = get(task, a) {
+            for r in replicates(&l.results, task, a) {
                 let ms = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.0}"));
                 md.push_str(&format!(
-                    "| {task} | {a} | {} | {:.2} h | {:.2} | {} / {} ms | `{}` | `{}` | {} |\n",
+                    "| {task} | {a}{} | {} | {:.2} h | {:.2} | {} / {} ms | `{}` | `{}` | {} |\n",
+                    seed_suffix(r.train_seed),
                     r.steps,
                     r.train_hours,
                     r.step_s,
@@ -215,7 +197,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         title,
         &tasks,
         &arms,
-        &get,
+        &l.results,
         &dir.join("success_by_level.svg"),
     )?;
     eprintln!(
@@ -227,18 +209,17 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
 
 /// For staged tasks (ALOHA's), the episodes of each arm and control that reached each stage
 /// (highest reward ≥ 1, 2, …), as ACT's evaluation reports them; empty for other tasks.
-fn stages_table<'a>(
-    tasks: &[(Level, String)],
-    arms: &[&str],
-    get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
-    l: &'a Loaded,
-) -> String {
+fn stages_table(tasks: &[(Level, String)], arms: &[&str], l: &Loaded) -> String {
     let mut md = String::new();
     for (_, task) in tasks {
         let c = l.controls.get(task).map(|c| &c.controls);
-        let mut rows: Vec<(&str, &EvalFigures)> = arms
+        let mut rows: Vec<(String, &EvalFigures)> = arms
             .iter()
-            .filter_map(|a| get(task, a).map(|r| (*a, &r.test)))
+            .flat_map(|a| {
+                replicates(&l.results, task, a)
+                    .into_iter()
+                    .map(move |r| (format!("{a}{}", seed_suffix(r.train_seed)), &r.test))
+            })
             .collect();
         for (who, f) in [
             (
@@ -248,7 +229,7 @@ fn stages_table<'a>(
             ("untrained", c.and_then(|c| c.untrained.as_ref())),
             ("cameras frozen", c.and_then(|c| c.frozen_cameras.as_ref())),
         ] {
-            rows.extend(f.map(|f| (who, f)));
+            rows.extend(f.map(|f| (who.to_string(), f)));
         }
         rows.retain(|(_, f)| !f.stages.is_empty());
         let Some((_, first)) = rows.first() else {
@@ -286,19 +267,22 @@ fn short(rev: &str) -> String {
 
 type Means = Vec<(Level, (usize, Vec<f64>))>;
 
-/// Per level: the tasks where every arm has a result, and each arm's mean over them.
-fn level_means<'a>(
-    tasks: &[(Level, String)],
-    arms: &[&str],
-    get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
-) -> Means {
+/// Per level: the tasks where every arm has a result, and each arm's mean over them (a task's
+/// training seeds averaged first).
+fn level_means(tasks: &[(Level, String)], arms: &[&str], results: &[TaskResult]) -> Means {
+    let replicate_mean = |t: &str, a: &str| {
+        let rs = replicates(results, t, a);
+        rs.iter().map(|r| r.test_success_rate).sum::<f64>() / rs.len().max(1) as f64
+    };
     let mut levels: Vec<&Level> = tasks.iter().map(|(l, _)| l).collect();
     levels.dedup();
     let mut out = Vec::new();
     for level in levels {
         let full: Vec<&String> = tasks
             .iter()
-            .filter(|(l, t)| l == level && arms.iter().all(|a| get(t, a).is_some()))
+            .filter(|(l, t)| {
+                l == level && arms.iter().all(|a| !replicates(results, t, a).is_empty())
+            })
             .map(|(_, t)| t)
             .collect();
         if full.is_empty() {
@@ -306,13 +290,7 @@ fn level_means<'a>(
         }
         let means = arms
             .iter()
-            .map(|a| {
-                full.iter()
-                    .filter_map(|t| get(t, a))
-                    .map(|r| r.test_success_rate)
-                    .sum::<f64>()
-                    / full.len() as f64
-            })
+            .map(|a| full.iter().map(|t| replicate_mean(t, a)).sum::<f64>() / full.len() as f64)
             .collect();
         out.push((level.clone(), (full.len(), means)));
     }
@@ -337,11 +315,11 @@ const COLOURS: [RGBColor; 4] = [
 
 /// Grouped bars: per level (or per task, when every task has the same level), each arm's mean
 /// test success.
-fn plot<'a>(
+fn plot(
     benchmark: &str,
     tasks: &[(Level, String)],
     arms: &[&str],
-    get: &dyn Fn(&str, &str) -> Option<&'a TaskResult>,
+    results: &[TaskResult],
     path: &Path,
 ) -> Result<()> {
     let by_task = tasks.iter().all(|(l, _)| *l == tasks[0].0);
@@ -350,9 +328,9 @@ fn plot<'a>(
             .iter()
             .map(|(_, t)| (level_of(t), t.clone()))
             .collect();
-        level_means(&per_task, arms, get)
+        level_means(&per_task, arms, results)
     } else {
-        level_means(tasks, arms, get)
+        level_means(tasks, arms, results)
     };
     let err = |e: String| anyhow!("plot: {e}");
     let root = SVGBackend::new(path, (800, 460)).into_drawing_area();

@@ -1,0 +1,179 @@
+//! Replicates: a (task, arm) trained from several seeds (`compare --train-seed`). Each seed's
+//! result is its own file; the table shows them side by side, pairs arms trained from the same
+//! seed, and averages seeds before tasks.
+
+use super::report::{pct, Level};
+use super::TaskResult;
+use crate::significance::{Pairing, RECIPE};
+
+/// Every result of (task, arm), one per training seed, the lowest seed first.
+pub(super) fn replicates<'a>(
+    results: &'a [TaskResult],
+    task: &str,
+    arm: &str,
+) -> Vec<&'a TaskResult> {
+    let mut v: Vec<&TaskResult> = results
+        .iter()
+        .filter(|r| r.task == task && r.arm == arm)
+        .collect();
+    v.sort_by_key(|r| r.train_seed);
+    v
+}
+
+/// `` for the default training seed (0), else ` (seed N)`.
+pub(super) fn seed_suffix(seed: u64) -> String {
+    if seed == 0 {
+        String::new()
+    } else {
+        format!(" (seed {seed})")
+    }
+}
+
+/// A table cell: one result as `pct`, replicates each with their training seed.
+pub(super) fn cell(rs: &[&TaskResult]) -> String {
+    match rs {
+        [] => "–".into(),
+        [r] => format!("{}{}", pct(&r.test), seed_suffix(r.train_seed)),
+        _ => rs
+            .iter()
+            .map(|r| format!("seed {}: {}", r.train_seed, pct(&r.test)))
+            .collect::<Vec<_>>()
+            .join("; "),
+    }
+}
+
+/// Per task, each other arm against the recipe arm trained with the same seed.
+pub(super) fn pairings<'a>(
+    tasks: &'a [(Level, String)],
+    arms: &[&'a str],
+    results: &'a [TaskResult],
+) -> Vec<Pairing<'a>> {
+    let mut out = Vec::new();
+    for (_, task) in tasks {
+        for recipe in replicates(results, task, RECIPE) {
+            for a in arms.iter().filter(|a| **a != RECIPE) {
+                out.extend(
+                    replicates(results, task, a)
+                        .into_iter()
+                        .filter(|o| o.train_seed == recipe.train_seed)
+                        .map(|o| Pairing {
+                            task,
+                            arm: a,
+                            seed: o.train_seed,
+                            recipe: &recipe.test,
+                            other: &o.test,
+                        }),
+                );
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::rebuild;
+    use super::*;
+    use crate::results::{EvalFigures, Provenance};
+
+    fn result(arm: &str, seed: u64, successes: u64) -> TaskResult {
+        let test = EvalFigures {
+            mode: "simulated-time".into(),
+            first_seed: 2_000_000,
+            episodes: 50,
+            successes,
+            success_rate: successes as f64 / 50.0,
+            wilson_low: 0.1,
+            wilson_high: 0.9,
+            mean_time_to_success_s: None,
+            median_time_to_success_s: None,
+            inference_ms_p50: None,
+            inference_ms_p99: None,
+            e2e_ms_p50: None,
+            wall_s: 1.0,
+            stages: Vec::new(),
+        };
+        TaskResult {
+            benchmark: "aloha".into(),
+            task: "transfer-cube".into(),
+            level: "bimanual".into(),
+            arm: arm.into(),
+            train_seed: seed,
+            what: arm.into(),
+            test_success_rate: test.success_rate,
+            test_seeds: (2_000_000..2_000_050).collect(),
+            wilson_low: 0.1,
+            wilson_high: 0.9,
+            test,
+            train_hours: 1.0,
+            steps: 2500,
+            step_s: 1.3,
+            checkpoint: "ckpt".into(),
+            denoiser_params: 1,
+            encoder_params: 1,
+            demonstrations: 50,
+            command: "c".into(),
+            train_command: "t".into(),
+            train_options: serde_json::Value::Null,
+            train_revision: "abc".into(),
+            simulator: Default::default(),
+            provenance: Provenance {
+                git_revision: "abc".into(),
+                machine: "m".into(),
+                finished_utc: "now".into(),
+            },
+        }
+    }
+
+    #[test]
+    fn replicates_sit_side_by_side_pair_by_seed_and_average_first() {
+        let dir = tempfile::tempdir().unwrap();
+        // Seed 0 written without the field, as results before `--train-seed` were.
+        let mut old = serde_json::to_value(result("ti", 0, 14)).unwrap();
+        old.as_object_mut().unwrap().remove("train_seed");
+        std::fs::write(
+            dir.path().join("transfer-cube--ti.json"),
+            serde_json::to_vec(&old).unwrap(),
+        )
+        .unwrap();
+        for (arm, seed, k) in [("ti", 1, 20), ("ti-causal", 0, 47), ("ti-causal", 1, 40)] {
+            let name = match seed {
+                0 => format!("transfer-cube--{arm}.json"),
+                s => format!("transfer-cube--{arm}--seed{s}.json"),
+            };
+            let r = result(arm, seed, k);
+            std::fs::write(dir.path().join(name), serde_json::to_vec(&r).unwrap()).unwrap();
+        }
+        rebuild(dir.path()).unwrap();
+        let md = std::fs::read_to_string(dir.path().join("table.md")).unwrap();
+        assert!(
+            md.contains("| seed 0: 28 % (14/50, 10–90); seed 1: 40 % (20/50, 10–90) |"),
+            "{md}"
+        );
+        // Each pairing holds arms trained from the same seed.
+        assert!(
+            md.contains("| transfer-cube | ti-causal | non-causal"),
+            "{md}"
+        );
+        assert!(md.contains("| 14/50 | 47/50 | +66 points |"), "{md}");
+        assert!(
+            md.contains("| transfer-cube | ti-causal (seed 1) |"),
+            "{md}"
+        );
+        assert!(md.contains("| 20/50 | 40/50 | +40 points |"), "{md}");
+        // Seeds averaged within the task: (28 + 40) / 2 and (94 + 80) / 2.
+        assert!(md.contains("| bimanual | 1 | 34.0 % | 87.0 % |"), "{md}");
+        assert!(
+            md.contains("| transfer-cube | ti (seed 1) | 2500 |"),
+            "{md}"
+        );
+    }
+
+    #[test]
+    fn one_result_names_its_seed_only_when_not_the_default() {
+        let (a, b) = (result("ti", 0, 14), result("ti", 2, 14));
+        assert_eq!(cell(&[&a]), "28 % (14/50, 10–90)");
+        assert_eq!(cell(&[&b]), "28 % (14/50, 10–90) (seed 2)");
+        assert_eq!(cell(&[]), "–");
+    }
+}
