@@ -2,7 +2,8 @@
 //! --benchmark aloha` collects two transfer-cube demonstrations with the ACT paper's scripted
 //! expert through the recorder, converts them with joint-space actions (14-D: six joints and a
 //! gripper per arm), trains ScaleDP-Ti one step, scores it on test seeds in simulated time,
-//! runs the controls and rebuilds the table and plot; the same recordings convert with 6D TCP
+//! runs the controls and rebuilds the table and plot, then a replicate from a second training
+//! seed lands beside it; the same recordings convert with 6D TCP
 //! actions too, and the checkpoint drives the puppets live through `serve`. Needs `.venv-sims`
 //! (`scripts/setup-sims.sh`, which `scripts/test.sh` runs).
 #![allow(clippy::unwrap_used)]
@@ -98,6 +99,32 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
     );
     assert!(table.contains("ACT paper's Table I"), "{table}");
     assert!(res.join("success_by_level.svg").exists());
+
+    // A replicate from another training seed lands beside the seed-0 run, on the same
+    // demonstrations, and the table shows both.
+    let replicate: Vec<&str> = args.iter().copied().chain(["--train-seed", "1"]).collect();
+    cli_ok(&run_scaledp(&replicate, root), "compare --train-seed 1");
+    let r1 = read_json(&res.join("transfer-cube--ti--seed1.json"));
+    assert_eq!(r1["train_seed"], 1, "{r1}");
+    assert!(
+        r1["command"].as_str().unwrap().ends_with("--train-seed 1"),
+        "{r1}"
+    );
+    assert!(
+        r1["train_command"].as_str().unwrap().contains(" --seed 1 "),
+        "{r1}"
+    );
+    assert!(task.join("ti-seed1/checkpoints").is_dir());
+    assert_eq!(
+        read_json(&res.join("transfer-cube--ti.json"))["train_seed"],
+        0
+    );
+    let table = std::fs::read_to_string(res.join("table.md")).unwrap();
+    assert!(
+        table.contains("seed 0: ") && table.contains("; seed 1: "),
+        "{table}"
+    );
+    assert!(table.contains("| transfer-cube | ti (seed 1) |"), "{table}");
 
     // The same recordings in TCP space: 6D pose and gripper per arm.
     let tcp = root.join("tcp");
