@@ -68,6 +68,27 @@ impl EvalFigures {
         }
     }
 
+    /// A test fixture: `successes` of `episodes` in simulated time, interval 10–90 %.
+    #[cfg(test)]
+    pub(crate) fn counts(successes: u64, episodes: u64) -> Self {
+        EvalFigures {
+            mode: "simulated-time".into(),
+            first_seed: 2_000_000,
+            episodes,
+            successes,
+            success_rate: successes as f64 / episodes as f64,
+            wilson_low: 0.1,
+            wilson_high: 0.9,
+            mean_time_to_success_s: None,
+            median_time_to_success_s: None,
+            inference_ms_p50: None,
+            inference_ms_p99: None,
+            e2e_ms_p50: None,
+            wall_s: 1.0,
+            stages: Vec::new(),
+        }
+    }
+
     /// `34/50 (68 %, 54–79 %)`.
     pub fn cell(&self) -> String {
         format!(

@@ -40,6 +40,15 @@ pub(crate) struct Pairing<'a> {
     pub other: &'a EvalFigures,
 }
 
+/// `` for the default training seed (0), else ` (seed N)`.
+pub(crate) fn seed_suffix(seed: u64) -> String {
+    if seed == 0 {
+        String::new()
+    } else {
+        format!(" (seed {seed})")
+    }
+}
+
 /// `0.009`, `< 0.001`.
 fn p_cell(p: Option<f64>) -> String {
     match p {
@@ -74,11 +83,7 @@ pub(crate) fn table(pairings: &[Pairing], with_task: bool) -> String {
                 String::new()
             },
             p.arm,
-            if p.seed == 0 {
-                String::new()
-            } else {
-                format!(" (seed {})", p.seed)
-            },
+            seed_suffix(p.seed),
             p.recipe.successes,
             p.recipe.episodes,
             p.other.successes,
@@ -94,22 +99,7 @@ mod tests {
     use super::*;
 
     fn figures(successes: u64, episodes: u64) -> EvalFigures {
-        EvalFigures {
-            mode: "simulated-time".into(),
-            first_seed: 2_000_000,
-            episodes,
-            successes,
-            success_rate: successes as f64 / episodes as f64,
-            wilson_low: 0.0,
-            wilson_high: 1.0,
-            mean_time_to_success_s: None,
-            median_time_to_success_s: None,
-            inference_ms_p50: None,
-            inference_ms_p99: None,
-            e2e_ms_p50: None,
-            wall_s: 0.0,
-            stages: Vec::new(),
-        }
+        EvalFigures::counts(successes, episodes)
     }
 
     /// Against `scipy.stats.fisher_exact` (SciPy, `.venv-sims`) on this project's own results.

@@ -4,7 +4,7 @@
 
 use super::report::{pct, Level};
 use super::TaskResult;
-use crate::significance::{Pairing, RECIPE};
+use crate::significance::{seed_suffix, Pairing, RECIPE};
 
 /// Every result of (task, arm), one per training seed, the lowest seed first.
 pub(super) fn replicates<'a>(
@@ -18,15 +18,6 @@ pub(super) fn replicates<'a>(
         .collect();
     v.sort_by_key(|r| r.train_seed);
     v
-}
-
-/// `` for the default training seed (0), else ` (seed N)`.
-pub(super) fn seed_suffix(seed: u64) -> String {
-    if seed == 0 {
-        String::new()
-    } else {
-        format!(" (seed {seed})")
-    }
 }
 
 /// A table cell: one result as `pct`, replicates each with their training seed.
@@ -72,27 +63,12 @@ pub(super) fn pairings<'a>(
 
 #[cfg(test)]
 mod tests {
-    use super::super::rebuild;
+    use super::super::{rebuild, result_path};
     use super::*;
     use crate::results::{EvalFigures, Provenance};
 
     fn result(arm: &str, seed: u64, successes: u64) -> TaskResult {
-        let test = EvalFigures {
-            mode: "simulated-time".into(),
-            first_seed: 2_000_000,
-            episodes: 50,
-            successes,
-            success_rate: successes as f64 / 50.0,
-            wilson_low: 0.1,
-            wilson_high: 0.9,
-            mean_time_to_success_s: None,
-            median_time_to_success_s: None,
-            inference_ms_p50: None,
-            inference_ms_p99: None,
-            e2e_ms_p50: None,
-            wall_s: 1.0,
-            stages: Vec::new(),
-        };
+        let test = EvalFigures::counts(successes, 50);
         TaskResult {
             benchmark: "aloha".into(),
             task: "transfer-cube".into(),
@@ -137,12 +113,9 @@ mod tests {
         )
         .unwrap();
         for (arm, seed, k) in [("ti", 1, 20), ("ti-causal", 0, 47), ("ti-causal", 1, 40)] {
-            let name = match seed {
-                0 => format!("transfer-cube--{arm}.json"),
-                s => format!("transfer-cube--{arm}--seed{s}.json"),
-            };
+            let path = result_path(dir.path(), "transfer-cube", arm, seed);
             let r = result(arm, seed, k);
-            std::fs::write(dir.path().join(name), serde_json::to_vec(&r).unwrap()).unwrap();
+            std::fs::write(path, serde_json::to_vec(&r).unwrap()).unwrap();
         }
         rebuild(dir.path()).unwrap();
         let md = std::fs::read_to_string(dir.path().join("table.md")).unwrap();

@@ -10,11 +10,11 @@ use anyhow::{anyhow, bail, Context, Result};
 use plotters::prelude::*;
 use scaledp_schema::benchmarks::Difficulty;
 
-use super::replicates::{cell, pairings, replicates, seed_suffix};
+use super::replicates::{cell, pairings, replicates};
 use super::{TaskControls, TaskResult};
 use crate::arms::ARMS;
 use crate::results::EvalFigures;
-use crate::significance;
+use crate::significance::{self, seed_suffix};
 
 /// Whether `dir` holds a benchmark's results (files named `<task>--<arm>.json`).
 pub(crate) fn is_benchmark(dir: &Path) -> bool {
