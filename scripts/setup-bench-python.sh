@@ -20,6 +20,15 @@ if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.ve
 fi
 .venv-bench/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
 # --no-cache-dir: a fresh machine would otherwise keep a second copy of those 4.6 GB in pip's
-# cache, and CI's disk is shared with a release build of ~60 executables.
-.venv-bench/bin/python -m pip install --no-cache-dir --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"
+# cache, and CI's disk is shared with a release build of ~90 executables. pip holds every
+# downloaded wheel until the install ends: its temporary files go beside the venv, on the disk
+# this script reports on, rather than in a /tmp that may be a small tmpfs.
+tmp=.venv-bench/pip-tmp
+mkdir -p "$tmp"
+trap 'rm -rf "$tmp"' EXIT
+if ! TMPDIR="$PWD/$tmp" .venv-bench/bin/python -m pip install --no-cache-dir --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"; then
+  free=$(df -Pk . | awk 'NR == 2 {printf "%.1f", $4 / 1048576}')
+  echo "scripts/setup-bench-python.sh: installing lerobot ${LEROBOT_VERSION} failed with ${free} GB free on $(df -P . | awk 'NR == 2 {print $6}'); it needs about 13 GB there while installing (4.6 GB of wheels, 8.3 GB installed); run it again once there is room (it resumes)" >&2
+  exit 1
+fi
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
