@@ -24,7 +24,7 @@ report() {
   printf 'total %d min %d s (exit %d)\n' $((($(date +%s) - start) / 60)) $((($(date +%s) - start) % 60)) "$rc"
 }
 trap report EXIT
-# A fresh run needs about 17 GB here (the three venvs 10.5, target/ 4, cargo's registry 1.1):
+# A fresh clone used 14.4 GB here (the three venvs 10.4, target/ 4.0; cargo's registry aside):
 # say what the disk had, so a run that fills it is told apart from a failing test.
 free_disk() { df -Ph . | awk 'NR == 2 {print $4 " free on " $6}'; }
 echo "scripts/test.sh: $(free_disk) at the start"
