@@ -27,8 +27,8 @@ tmp=.venv-bench/pip-tmp
 mkdir -p "$tmp"
 trap 'rm -rf "$tmp"' EXIT
 if ! TMPDIR="$PWD/$tmp" .venv-bench/bin/python -m pip install --no-cache-dir --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"; then
-  free=$(df -Pk . | awk 'NR == 2 {printf "%.1f", $4 / 1048576}')
-  echo "scripts/setup-bench-python.sh: installing lerobot ${LEROBOT_VERSION} failed with ${free} GB free on $(df -P . | awk 'NR == 2 {print $6}'); it needs about 13 GB there while installing (4.6 GB of wheels, 8.3 GB installed); run it again once there is room (it resumes)" >&2
+  read -r free mount < <(df -Pk . | awk 'NR == 2 {printf "%.1f %s\n", $4 / 1048576, $6}')
+  echo "scripts/setup-bench-python.sh: installing lerobot ${LEROBOT_VERSION} failed with ${free} GB free on ${mount}; it needs about 13 GB there while installing (4.6 GB of wheels, 8.3 GB installed); run it again once there is room (it resumes)" >&2
   exit 1
 fi
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
