@@ -59,8 +59,8 @@ pub struct CompareArgs {
     /// or the benchmark's name).
     #[arg(long)]
     pub name: Option<String>,
-    /// Arms to run, comma-separated (ti, ti-causal, s, dp-t, dp-t-l12, dp-t-l14), one after the
-    /// other [ti,ti-causal,s; a benchmark: ti,dp-t].
+    /// Arms to run, comma-separated (ti, ti-causal, s, ti-sincos, dp-t, dp-t-l12, dp-t-l14),
+    /// one after the other [ti,ti-causal,s; a benchmark: ti,dp-t].
     #[arg(long, value_delimiter = ',')]
     pub arms: Vec<String>,
     /// The training recipe every arm uses [cpu-sim; MetaWorld: cpu-metaworld; ALOHA:

@@ -1,7 +1,7 @@
 //! The comparison's arms: the recipe's model, the causal ablation, the next size up, and the
 //! paper's baseline (DP-T) with the depths its scaling claim is about.
 
-use scaledp_policy::{Architecture, Attention, ModelSize, TrainOptions, DPT_DIMS};
+use scaledp_policy::{Architecture, Attention, ModelSize, PosEmbed, TrainOptions, DPT_DIMS};
 
 /// One arm: a denoiser (architecture, size, depth, attention), everything else the recipe's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -17,6 +17,8 @@ pub struct Arm {
     pub layers: Option<usize>,
     /// The denoiser's attention.
     pub attention: Attention,
+    /// ScaleDP's positional embedding (learned, as the paper's; DP-T keeps its own).
+    pub pos_embed: PosEmbed,
     /// One line for the table.
     pub what: &'static str,
 }
@@ -30,6 +32,9 @@ impl Arm {
             "s" => Some("a larger ScaleDP does better (this arm above Ti)"),
             "dp-t" => Some("ScaleDP-Ti above DP-T, the paper's baseline"),
             "dp-t-l12" | "dp-t-l14" => Some("ScaleDP-Ti above a deeper DP-T"),
+            "ti-sincos" => {
+                Some("fixed sin-cos positions lift non-causal Ti (not the paper's claim)")
+            }
             _ => None,
         }
     }
@@ -39,7 +44,8 @@ impl Arm {
         let o = base
             .arch(self.arch)
             .model(self.size)
-            .attention(self.attention);
+            .attention(self.attention)
+            .pos_embed(self.pos_embed);
         match self.layers {
             Some(depth) => {
                 let (_, width, heads) = match self.arch {
@@ -65,6 +71,7 @@ const fn scaledp(
         size,
         layers: None,
         attention,
+        pos_embed: PosEmbed::Learned,
         what,
     }
 }
@@ -76,12 +83,13 @@ const fn dpt(name: &'static str, layers: Option<usize>, what: &'static str) -> A
         size: ModelSize::Ti,
         layers,
         attention: Attention::Causal,
+        pos_embed: PosEmbed::Learned,
         what,
     }
 }
 
 /// Every arm, the recipe's first.
-pub const ARMS: [Arm; 6] = [
+pub const ARMS: [Arm; 7] = [
     scaledp(
         "ti",
         ModelSize::Ti,
@@ -100,6 +108,15 @@ pub const ARMS: [Arm; 6] = [
         Attention::NonCausal,
         "ScaleDP-S, non-causal attention",
     ),
+    Arm {
+        pos_embed: PosEmbed::SinCos,
+        ..scaledp(
+            "ti-sincos",
+            ModelSize::Ti,
+            Attention::NonCausal,
+            "ScaleDP-Ti, non-causal, DiT's fixed sin-cos pos_embed (a follow-up, not the paper's model)",
+        )
+    },
     dpt(
         "dp-t",
         None,

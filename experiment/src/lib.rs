@@ -337,8 +337,12 @@ fn train_command(
         0 => String::new(),
         s => format!(" --seed {s}"),
     };
+    let pos = match arm.pos_embed {
+        scaledp_policy::PosEmbed::Learned => String::new(),
+        p => format!(" --pos-embed {p}"),
+    };
     format!(
-        "scaledp train {dataset} --preset {preset} --model {model}{layers} --attention {} --steps {} --checkpoint-every {} --batch-size {}{seed} --out {}",
+        "scaledp train {dataset} --preset {preset} --model {model}{layers} --attention {}{pos} --steps {} --checkpoint-every {} --batch-size {}{seed} --out {}",
         arm.attention,
         opts.get_steps(),
         opts.get_checkpoint_every(),

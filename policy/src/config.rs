@@ -124,6 +124,10 @@ pub struct ModelConfig {
     /// and itself (the causal ablation, DP-T style).
     #[serde(default)]
     pub attention: Attention,
+    /// Where the denoiser learns the action tokens' order from: a learned `pos_embed` (ScaleDP's,
+    /// N(0, 0.02) at the start) or DiT's fixed 1-D sin-cos table, never trained (ScaleDP only).
+    #[serde(default)]
+    pub pos_embed: PosEmbed,
     /// Which denoiser: ScaleDP's DiT (the default) or diffusion_policy's DP-T, the paper's
     /// baseline.
     #[serde(default)]
@@ -241,6 +245,41 @@ impl std::fmt::Display for Attention {
     }
 }
 
+/// The denoiser's positional embedding of the action tokens (`pos_embed`, `[1, C, d]` either way,
+/// under the same state-dict name).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PosEmbed {
+    /// Trained from N(0, 0.02), as the ScaleDP authors' code has it.
+    #[default]
+    Learned,
+    /// DiT's `get_1d_sincos_pos_embed`: `[sin(p·ω), cos(p·ω)]` with ω_i = 10000^(−2i/d), fixed
+    /// (rows of norm √(d/2), where a learned one starts near 0.02·√d).
+    SinCos,
+}
+
+impl std::str::FromStr for PosEmbed {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().replace(['-', '_'], "").as_str() {
+            "learned" => Ok(PosEmbed::Learned),
+            "sincos" => Ok(PosEmbed::SinCos),
+            _ => Err(Error::Config(format!(
+                "pos_embed {s:?}: learned or sin-cos"
+            ))),
+        }
+    }
+}
+
+impl std::fmt::Display for PosEmbed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            PosEmbed::Learned => "learned",
+            PosEmbed::SinCos => "sin-cos",
+        })
+    }
+}
+
 impl ModelConfig {
     /// A preset with the paper's defaults (To 2, C 16, crop 0.9, ResNet-18 with 32 keypoints →
     /// 64 features per camera) for the given inputs.
@@ -271,6 +310,7 @@ impl ModelConfig {
             feature_dim: 64,
             image_range: ImageRange::Symmetric,
             attention: Attention::NonCausal,
+            pos_embed: PosEmbed::Learned,
             arch: Architecture::ScaleDp,
             dropout: 0.0,
         }
@@ -354,6 +394,19 @@ impl ModelConfig {
         if self.obs_horizon == 0 || self.action_chunk == 0 || self.action_dim == 0 {
             return bad("obs_horizon, action_chunk and the action width must be at least 1".into());
         }
+        if self.pos_embed == PosEmbed::SinCos {
+            if self.arch == Architecture::DpT {
+                return bad(
+                    "a fixed sin-cos pos_embed is a ScaleDP option; DP-T learns its own".into(),
+                );
+            }
+            if self.hidden % 2 != 0 {
+                return bad(format!(
+                    "a sin-cos pos_embed needs an even width, not {}",
+                    self.hidden
+                ));
+            }
+        }
         if !(0.0..1.0).contains(&self.dropout) {
             return bad(format!("dropout {} outside [0, 1)", self.dropout));
         }
@@ -399,5 +452,48 @@ impl Default for DiffusionConfig {
             train_steps: 100,
             inference_steps: 10,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sin_cos_pos_embed_parses_and_is_refused_where_it_cannot_be() {
+        for s in ["sin-cos", "sincos", "SIN_COS"] {
+            assert_eq!(s.parse::<PosEmbed>().ok(), Some(PosEmbed::SinCos), "{s}");
+        }
+        assert_eq!("learned".parse::<PosEmbed>().ok(), Some(PosEmbed::Learned));
+        assert!("rope".parse::<PosEmbed>().is_err());
+        let mut c = ModelConfig::new(ModelSize::Ti, vec![], (64, 64), 3, 2);
+        c.pos_embed = PosEmbed::SinCos;
+        assert!(c.validate().is_ok());
+        c.hidden = 36;
+        c.heads = 3;
+        assert!(c.validate().is_ok(), "36 is even");
+        (c.hidden, c.heads) = (33, 3);
+        let e = c
+            .validate()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("even width"), "{e}");
+        let mut d = ModelConfig::dp_t(vec![], (64, 64), 3, 2);
+        d.pos_embed = PosEmbed::SinCos;
+        let e = d
+            .validate()
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("DP-T"), "{e}");
+        // Configs written before the field read as the learned embedding.
+        let mut v = serde_json::to_value(ModelConfig::new(ModelSize::Ti, vec![], (8, 8), 3, 2))
+            .unwrap_or_default();
+        if let Some(o) = v.as_object_mut() {
+            o.remove("pos_embed");
+        }
+        let old: Option<ModelConfig> = serde_json::from_value(v).ok();
+        assert_eq!(old.map(|c| c.pos_embed), Some(PosEmbed::Learned));
     }
 }

@@ -95,8 +95,8 @@ pub use checkpoint::{
     NormalizerConfig,
 };
 pub use config::{
-    Architecture, Attention, DiffusionConfig, ImageRange, ModelConfig, ModelSize, DPT_DIMS,
-    DPT_DROPOUT,
+    Architecture, Attention, DiffusionConfig, ImageRange, ModelConfig, ModelSize, PosEmbed,
+    DPT_DIMS, DPT_DROPOUT,
 };
 pub use error::{Error, Mismatch, Result};
 pub use image_chain::{ImageChain, StoredImages, TrainResize, DEFAULT_JPEG_QUALITY};

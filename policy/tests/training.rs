@@ -7,7 +7,7 @@ mod common;
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
 use scaledp_policy::model::Crop;
-use scaledp_policy::{predict_episode, Event, Observation, Policy, Trainer};
+use scaledp_policy::{predict_episode, Event, Observation, Policy, PosEmbed, Trainer};
 
 fn losses(t: &mut Trainer, n: usize) -> Vec<f32> {
     (0..n).map(|_| t.step().map(|r| r.loss).unwrap()).collect()
@@ -252,4 +252,39 @@ fn mismatched_missing_and_foreign_checkpoints_are_named() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("already holds checkpoints"), "{e}");
+}
+
+/// `pos_embed: sin-cos`: DiT's table from the start, left bit for bit as it is by training
+/// (optimizer and EMA) while the learned weights move, and recorded in the checkpoint.
+#[test]
+fn a_sin_cos_pos_embed_stays_fixed_while_the_rest_trains() {
+    let ds = common::write(&common::Fixture::default());
+    let dev = Device::Cpu;
+    let out = tempfile::tempdir().unwrap();
+    let opts = common::tiny().steps(3).pos_embed(PosEmbed::SinCos);
+    let mut t = Trainer::new(&ds.location(), out.path(), opts, &dev).unwrap();
+    let start = t.save_checkpoint().unwrap();
+    let end = t.run(|_| {}).unwrap().checkpoint.unwrap();
+    let weights = |dir: &std::path::Path, name: &str| {
+        let w = candle_core::safetensors::load(dir.join("model.safetensors"), &dev).unwrap();
+        w[name].flatten_all().unwrap().to_vec1::<f32>().unwrap()
+    };
+    let pos = weights(&end, "pos_embed");
+    // Width 32, chunk 4: row p is [sin(p·ω_i), cos(p·ω_i)], ω_i = 10000^(−i/16), i < 16.
+    assert_eq!(pos.len(), 4 * 32);
+    for p in 0..4 {
+        for i in 0..16 {
+            let a = p as f64 * 10000f64.powf(-(i as f64) / 16.0);
+            assert_eq!(pos[p * 32 + i], a.sin() as f32, "row {p}, sin {i}");
+            assert_eq!(pos[p * 32 + 16 + i], a.cos() as f32, "row {p}, cos {i}");
+        }
+    }
+    assert_eq!(weights(&start, "pos_embed"), pos);
+    assert_ne!(
+        weights(&start, "x_embedder.weight"),
+        weights(&end, "x_embedder.weight"),
+        "the learned weights train"
+    );
+    let policy = Policy::load(out.path(), &dev).unwrap();
+    assert_eq!(policy.config().model.pos_embed, PosEmbed::SinCos);
 }

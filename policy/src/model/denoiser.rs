@@ -1,7 +1,8 @@
 //! The ScaleDP denoiser: a DiT over the action chunk with adaLN-Zero conditioning on
 //! `c = t_emb + cond_emb` and non-causal self-attention (every action token sees every other;
 //! [`crate::Attention::Causal`] masks later tokens for the paper's ablation, nothing else
-//! changes: same weights, same names).
+//! changes: same weights, same names). `pos_embed` is learned, or DiT's fixed sin-cos table
+//! under the same name ([`crate::PosEmbed::SinCos`]).
 //!
 //! State-dict names as the reference PyTorch module: `x_embedder.*`, `pos_embed`,
 //! `t_embedder.mlp.{0,2}.*`, `cond_obs_emb.*`, `blocks.{i}.attn.{qkv,proj}.*`,
@@ -10,6 +11,7 @@
 
 use candle_core::{Device, Tensor, D};
 
+use crate::config::PosEmbed;
 use crate::error::Result;
 use crate::model::params::{Builder, Init};
 
@@ -154,6 +156,8 @@ pub(crate) struct DenoiserDims {
     pub cond_dim: usize,
     /// The causal ablation (token i attends to tokens ≤ i only).
     pub causal: bool,
+    /// Learned or fixed sin-cos `pos_embed`.
+    pub pos_embed: PosEmbed,
 }
 
 /// ε-prediction network: noisy actions `[B, C, A]`, timesteps, condition `[B, cond]` → `[B, C, A]`.
@@ -180,7 +184,12 @@ impl Denoiser {
             .collect::<Result<_>>()?;
         Ok(Denoiser {
             x_embedder: Linear::new(&vb.pp("x_embedder"), p.action_dim, d, Init::XavierUniform)?,
-            pos_embed: vb.get(&[1, p.action_chunk, d], "pos_embed", n02, false)?,
+            pos_embed: match p.pos_embed {
+                PosEmbed::Learned => vb.get(&[1, p.action_chunk, d], "pos_embed", n02, false)?,
+                PosEmbed::SinCos => {
+                    vb.get_fixed(&[1, p.action_chunk, d], "pos_embed", Init::SinCos)?
+                }
+            },
             t_mlp0: Linear::new(&t.pp(0), FREQ_DIM, d, n02)?,
             t_mlp2: Linear::new(&t.pp(2), d, d, n02)?,
             cond_obs_emb: Linear::new(&vb.pp("cond_obs_emb"), p.cond_dim, d, n02)?,

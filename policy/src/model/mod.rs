@@ -313,6 +313,7 @@ fn dims(cfg: &ModelConfig) -> DenoiserDims {
         action_chunk: cfg.action_chunk,
         cond_dim: cfg.cond_dim(),
         causal: cfg.attention == Attention::Causal,
+        pos_embed: cfg.pos_embed,
     }
 }
 

@@ -28,6 +28,9 @@ pub(crate) enum Init {
     KaimingFanOut,
     /// PyTorch's default for Linear/Conv weights and biases: U(±1/√fan_in).
     FanInUniform(usize),
+    /// DiT's 1-D sin-cos table over the second-to-last axis: row p is `[sin(p·ω), cos(p·ω)]`
+    /// with ω_i = 10000^(−2i/d) for the last axis' d (even) values (no randomness drawn).
+    SinCos,
 }
 
 /// One parameter: its state-dict name, its variable, and whether AdamW decays it.
@@ -39,6 +42,9 @@ pub struct Param {
     pub var: Var,
     /// Weight decay applies (Linear and Conv weights only).
     pub decay: bool,
+    /// Never trained: the optimizer gets no gradient for it (a fixed table, PyTorch's
+    /// `requires_grad=False`); saved and loaded as any other.
+    pub frozen: bool,
 }
 
 enum Source {
@@ -116,6 +122,22 @@ impl Builder {
 
     /// The tensor `name` of `shape`, created, loaded or shaped as this builder does.
     pub fn get(&self, shape: &[usize], name: &str, init: Init, decay: bool) -> Result<Tensor> {
+        self.tensor(shape, name, init, decay, false)
+    }
+
+    /// As [`Builder::get`], for a tensor training leaves as it is ([`Param::frozen`]).
+    pub fn get_fixed(&self, shape: &[usize], name: &str, init: Init) -> Result<Tensor> {
+        self.tensor(shape, name, init, false, true)
+    }
+
+    fn tensor(
+        &self,
+        shape: &[usize],
+        name: &str,
+        init: Init,
+        decay: bool,
+        frozen: bool,
+    ) -> Result<Tensor> {
         let full = if self.prefix.is_empty() {
             name.to_string()
         } else {
@@ -156,6 +178,7 @@ impl Builder {
             name: full,
             var,
             decay,
+            frozen,
         });
         Ok(t)
     }
@@ -197,7 +220,30 @@ fn init_values(rng: &mut ChaCha8Rng, shape: &[usize], init: Init) -> Vec<f32> {
             normal(rng, n, (2.0 / fan_out as f64).sqrt())
         }
         Init::FanInUniform(fan_in) => uniform(rng, 1.0 / (fan_in.max(1) as f64).sqrt()),
+        Init::SinCos => sin_cos(shape),
     }
+}
+
+/// [`Init::SinCos`] of `shape` (`[…, rows, d]`; leading axes repeat the table).
+fn sin_cos(shape: &[usize]) -> Vec<f32> {
+    let d = shape.last().copied().unwrap_or(1);
+    let rows = shape.len().checked_sub(2).map_or(1, |i| shape[i]);
+    let half = (d / 2).max(1);
+    let table: Vec<f32> = (0..rows)
+        .flat_map(|p| {
+            (0..d).map(move |j| {
+                let (i, sin) = if j < half {
+                    (j, true)
+                } else {
+                    (j - half, false)
+                };
+                let a = p as f64 * 10000f64.powf(-(i as f64) / half as f64);
+                (if sin { a.sin() } else { a.cos() }) as f32
+            })
+        })
+        .collect();
+    let n: usize = shape.iter().product();
+    table.iter().copied().cycle().take(n).collect()
 }
 
 /// PyTorch's (fan_out, fan_in) of a weight `[out, in, *kernel]`.

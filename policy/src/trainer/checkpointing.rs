@@ -140,6 +140,7 @@ pub(super) fn config_for(
     model.resnet_width = o.resnet_width;
     model.image_range = o.image_range;
     model.attention = o.attention;
+    model.pos_embed = o.pos_embed;
     model.validate()?;
     let prov = provenance(dataset);
     let images = (!model.cameras.is_empty()).then(|| image_chain(&prov, &model));

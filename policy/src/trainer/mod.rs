@@ -315,7 +315,7 @@ impl Trainer {
         );
         let micro = self.opts.micro_batch;
         let mut phases = Phases::default();
-        let (loss, grads) = loss_and_grads(
+        let (loss, mut grads) = loss_and_grads(
             &self.model,
             &mut self.engine,
             &self.scheduler,
@@ -326,7 +326,11 @@ impl Trainer {
             &mut rng,
             &mut phases,
         )?;
-        for (p, g) in self.optim.params().iter().zip(&grads) {
+        for (p, g) in self.optim.params().iter().zip(grads.iter_mut()) {
+            if p.frozen {
+                // A fixed table (requires_grad=False): no update, no part in the clipping norm.
+                *g = None;
+            }
             if let Some(g) = g {
                 inspect(&p.name, g);
             }

@@ -340,6 +340,10 @@ impl EmaConfig {
 /// `ema ← decay · ema + (1 − decay) · param` for every pair (same order, same shapes).
 pub(crate) fn ema_update(ema: &[Param], params: &[Param], decay: f64) -> Result<()> {
     for (e, p) in ema.iter().zip(params) {
+        if p.frozen {
+            // d·x + (1 − d)·x is not always x in floats: a fixed table stays bit for bit.
+            continue;
+        }
         let (et, pt) = (e.var.as_tensor(), p.var.as_tensor());
         if et.device().is_cpu() {
             et.inplace_op2(pt, &EmaOp(decay as f32))?;
@@ -396,6 +400,7 @@ mod tests {
             name: name.into(),
             var: Var::zeros(1, candle_core::DType::F32, &Device::Cpu).unwrap(),
             decay,
+            frozen: false,
         }
     }
 

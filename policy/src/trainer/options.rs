@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Architecture, Attention, ImageRange, ModelSize, DPT_DIMS};
+use crate::config::{Architecture, Attention, ImageRange, ModelSize, PosEmbed, DPT_DIMS};
 use crate::trainer::loss::LossSpec;
 use crate::trainer::optim::{AdamWConfig, EmaConfig};
 
@@ -80,6 +80,8 @@ pub struct TrainOptions {
     #[serde(default)]
     pub(crate) attention: Attention,
     #[serde(default)]
+    pub(crate) pos_embed: PosEmbed,
+    #[serde(default)]
     pub(crate) arch: Architecture,
     /// Dropout instead of the architecture's (DP-T 0.3, ScaleDP none).
     #[serde(default)]
@@ -116,6 +118,7 @@ impl Default for TrainOptions {
             state_norm: StateNorm::MinMax,
             image_range: ImageRange::Symmetric,
             attention: Attention::NonCausal,
+            pos_embed: PosEmbed::Learned,
             arch: Architecture::ScaleDp,
             dropout: None,
         }
@@ -265,6 +268,11 @@ impl TrainOptions {
     /// The denoiser's attention (default non-causal for ScaleDP, causal for DP-T).
     pub fn attention(mut self, attention: Attention) -> Self {
         self.attention = attention;
+        self
+    }
+    /// ScaleDP's `pos_embed`: learned (default) or DiT's fixed sin-cos table.
+    pub fn pos_embed(mut self, pos_embed: PosEmbed) -> Self {
+        self.pos_embed = pos_embed;
         self
     }
     /// The denoiser's architecture (default ScaleDP); also sets the attention to the

@@ -13,6 +13,7 @@ mod ddp;
 mod dpt;
 mod interop;
 mod parity;
+mod pos_embed;
 mod recipes;
 
 use std::path::{Path, PathBuf};

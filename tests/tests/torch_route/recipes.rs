@@ -156,4 +156,8 @@ fn the_defaults_and_the_presets_are_the_rust_trainers() {
         assert_eq!(py_preset["resnet_width"], 32, "{name}");
         assert_eq!(py_preset["lr"], 1e-3, "{name}");
     }
+    let fixed = rust(TrainOptions::default().pos_embed(scaledp_policy::PosEmbed::SinCos));
+    let py_fixed = python_options(&["ds", "--pos-embed", "sin-cos"]);
+    assert_eq!(py_fixed["pos_embed"], "sin_cos");
+    assert_eq!(py_fixed["pos_embed"], fixed["pos_embed"]);
 }

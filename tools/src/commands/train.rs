@@ -105,6 +105,10 @@ pub struct TrainArgs {
     /// non-causal; DP-T: causal, its own masks].
     #[arg(long)]
     pub attention: Option<String>,
+    /// ScaleDP's positional embedding of the action tokens: learned (the paper's, from
+    /// N(0, 0.02)) or sin-cos (DiT's fixed table, not trained) [learned].
+    #[arg(long)]
+    pub pos_embed: Option<String>,
     /// Leave action steps past an episode's end out of the loss (by default they are trained
     /// on, as diffusion_policy and LeRobot do: they repeat the last action).
     #[arg(long)]
@@ -201,6 +205,9 @@ pub fn options(a: &TrainArgs) -> Result<TrainOptions> {
     if let Some(at) = &a.attention {
         o = o.attention(at.parse()?);
     }
+    if let Some(p) = &a.pos_embed {
+        o = o.pos_embed(p.parse()?);
+    }
     if a.mask_padding {
         o = o.mask_padding(true);
     }
@@ -225,9 +232,9 @@ fn print_counts(what: &str, cfg: &ModelConfig) -> Result<()> {
     let n = ScaleDp::count(cfg)?;
     let (cw, ch) = cfg.crop_size();
     println!(
-        "{what}: {} (depth {}, width {}, heads {}, {} attention), {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}",
+        "{what}: {} (depth {}, width {}, heads {}, {} attention, {} pos_embed), {} cameras {}x{} cropped to {cw}x{ch}, state {}, action {}, To {}, C {}",
         cfg.denoiser_name(),
-        cfg.depth, cfg.hidden, cfg.heads, cfg.attention, cfg.cameras.len(), cfg.image_width, cfg.image_height,
+        cfg.depth, cfg.hidden, cfg.heads, cfg.attention, cfg.pos_embed, cfg.cameras.len(), cfg.image_width, cfg.image_height,
         cfg.state_dim, cfg.action_dim, cfg.obs_horizon, cfg.action_chunk
     );
     println!(

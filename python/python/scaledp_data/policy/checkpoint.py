@@ -55,7 +55,7 @@ def model_config(info: Dict[str, Any], o: Dict[str, Any]) -> Dict[str, Any]:
         "cameras": list(info["cameras"]), "image_width": w, "image_height": h,
         "crop": o["crop"], "resnet_width": o["resnet_width"], "keypoints": 32,
         "feature_dim": 64, "image_range": o["image_range"], "attention": o["attention"],
-        "arch": arch, "dropout": dropout,
+        "arch": arch, "dropout": dropout, "pos_embed": o.get("pos_embed", "learned"),
     }
     validate_model(m)
     return m
@@ -70,6 +70,11 @@ def validate_model(m: Dict[str, Any]) -> None:
                          f"{m['heads']} heads (depth {m['depth']})")
     if min(m["obs_horizon"], m["action_chunk"], m["action_dim"]) < 1:
         raise ValueError("obs_horizon, action_chunk and the action width must be at least 1")
+    if m.get("pos_embed", "learned") == "sin_cos":
+        if m.get("arch") == "dp_t":
+            raise ValueError("a fixed sin-cos pos_embed is a ScaleDP option; DP-T learns its own")
+        if m["hidden"] % 2:
+            raise ValueError(f"a sin-cos pos_embed needs an even width, not {m['hidden']}")
     if not 0.0 <= m.get("dropout", 0.0) < 1.0:
         raise ValueError(f"dropout {m['dropout']} outside [0, 1)")
     if not 0.0 < m["crop"] <= 1.0:

@@ -346,6 +346,13 @@ class ImagePolicy(nn.Module):
         return self.denoise(x, self.condition(t, cond))
 
 
+def sin_cos(rows: int, d: int) -> torch.Tensor:
+    """DiT's ``get_1d_sincos_pos_embed``: row p is ``[sin(p·ω), cos(p·ω)]``, ω_i = 10000^(−2i/d)."""
+    omega = 1.0 / 10000 ** (torch.arange(d // 2, dtype=torch.float64) / (d / 2.0))
+    a = torch.arange(rows, dtype=torch.float64)[:, None] * omega[None, :]
+    return torch.cat([a.sin(), a.cos()], dim=1).float()
+
+
 class ScaleDPPolicy(ImagePolicy):
     """The encoders, and the DiT denoiser's modules at the top level. A fresh module is
     initialised as DiT (adaLN-Zero: the untrained denoiser outputs exactly 0) and the trunks as
@@ -356,7 +363,9 @@ class ScaleDPPolicy(ImagePolicy):
         super().__init__(cfg)
         d, a, c = cfg["hidden"], cfg["action_dim"], cfg["action_chunk"]
         self.x_embedder = nn.Linear(a, d)
-        self.pos_embed = nn.Parameter(torch.zeros(1, c, d))
+        # ``pos_embed: sin_cos``: DiT's fixed table, never trained (as the Rust trainer has it).
+        self.fixed_pos = cfg.get("pos_embed", "learned") == "sin_cos"
+        self.pos_embed = nn.Parameter(torch.zeros(1, c, d), requires_grad=not self.fixed_pos)
         self.t_embedder = TimestepEmbedder(d)
         self.cond_obs_emb = nn.Linear(self.cond_dim, d)
         causal = cfg.get("attention", "non_causal") == "causal"
@@ -382,7 +391,10 @@ class ScaleDPPolicy(ImagePolicy):
                     bound = math.sqrt(6.0 / (m.in_features + m.out_features))
                     m.weight.copy_(torch.rand(m.weight.shape, generator=g) * 2 * bound - bound)
                     m.bias.zero_()
-            normal(self.pos_embed, 0.02)
+            if self.fixed_pos:
+                self.pos_embed.copy_(sin_cos(*self.pos_embed.shape[1:]).unsqueeze(0))
+            else:
+                normal(self.pos_embed, 0.02)
             for lin in (self.cond_obs_emb, self.t_embedder.mlp[0], self.t_embedder.mlp[2]):
                 normal(lin.weight, 0.02)
             for blk in self.blocks:

@@ -50,7 +50,7 @@ def default_options() -> Dict[str, Any]:
         "cameras": None, "image_size": None, "crop": 0.9, "loader_threads": 0,
         "max_episodes": None, "loss": {"noise_samples": 1, "mask_padding": False},
         "state_norm": "min_max", "image_range": "symmetric", "attention": "non_causal",
-        "arch": "scale_dp", "dropout": None,
+        "arch": "scale_dp", "dropout": None, "pos_embed": "learned",
     }
 
 
@@ -121,6 +121,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "encoded observation [1]")
     p.add_argument("--attention", help="non-causal or causal [ScaleDP: non-causal; DP-T: "
                    "causal, its masks]")
+    p.add_argument("--pos-embed", help="ScaleDP's positional embedding: learned (the paper's) "
+                   "or sin-cos (DiT's fixed table, not trained) [learned]")
     p.add_argument("--mask-padding", action="store_true", help="leave action steps past an "
                    "episode's end out of the loss")
     p.add_argument("--state-norm", default="min-max", help="min-max or mean-std")
@@ -149,6 +151,13 @@ def _attention(s: str) -> str:
     raise ValueError(f"attention {s!r}: non-causal or causal")
 
 
+def _pos_embed(s: str) -> str:
+    v = s.lower().replace("-", "").replace("_", "")
+    if v in ("learned", "sincos"):
+        return "learned" if v == "learned" else "sin_cos"
+    raise ValueError(f"pos_embed {s!r}: learned or sin-cos")
+
+
 def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
     """The options of a new run from the command line (``options()`` of train.rs)."""
     model = a.model.lower().replace("_", "-")
@@ -170,6 +179,8 @@ def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
     o.update({"size": "ti" if dpt else model, "seed": a.seed, "crop": a.crop,
               "attention": _attention(attention), "state_norm": state_norm,
               "arch": "dp_t" if dpt else "scale_dp"})
+    if getattr(a, "pos_embed", None) is not None:
+        o["pos_embed"] = _pos_embed(a.pos_embed)
     for key in ("obs_horizon", "action_chunk"):
         if getattr(a, key, None) is not None:
             o[key] = getattr(a, key)

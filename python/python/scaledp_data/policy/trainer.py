@@ -339,8 +339,11 @@ class Trainer:
     def _ema_update(self, decay: float) -> None:
         d32 = float(torch.tensor(decay, dtype=torch.float32))
         keep = float(torch.tensor(1.0, dtype=torch.float32) - torch.tensor(decay, dtype=torch.float32))
+        # A fixed table (requires_grad=False) stays bit for bit, as in the Rust trainer.
+        fixed = {n for n, p in self.policy.named_parameters() if not p.requires_grad}
         for name, p in self.policy.state_dict().items():
-            self.ema[name].mul_(d32).add_(p, alpha=keep)
+            if name not in fixed:
+                self.ema[name].mul_(d32).add_(p, alpha=keep)
 
     def validate(self) -> Optional[Dict[str, Any]]:
         """Rank 0 validates the EMA weights on held-out episodes; the others wait."""
