@@ -32,8 +32,9 @@ impl Arm {
             "s" => Some("a larger ScaleDP does better (this arm above Ti)"),
             "dp-t" => Some("ScaleDP-Ti above DP-T, the paper's baseline"),
             "dp-t-l12" | "dp-t-l14" => Some("ScaleDP-Ti above a deeper DP-T"),
+            // Not the paper's: a hypothesis from the ALOHA results (docs/experiments.md).
             "ti-sincos" => {
-                Some("fixed sin-cos positions lift non-causal Ti (not the paper's claim)")
+                Some("none (here: fixed positions lift non-causal Ti, this arm above it)")
             }
             _ => None,
         }

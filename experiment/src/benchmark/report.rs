@@ -306,11 +306,14 @@ fn display_name(benchmark: &str) -> &str {
     }
 }
 
-const COLOURS: [RGBColor; 4] = [
+const COLOURS: [RGBColor; 7] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(140, 86, 75),
+    RGBColor(23, 190, 207),
 ];
 
 /// Grouped bars: per level (or per task, when every task has the same level), each arm's mean

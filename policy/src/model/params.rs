@@ -29,7 +29,8 @@ pub(crate) enum Init {
     /// PyTorch's default for Linear/Conv weights and biases: U(±1/√fan_in).
     FanInUniform(usize),
     /// DiT's 1-D sin-cos table over the second-to-last axis: row p is `[sin(p·ω), cos(p·ω)]`
-    /// with ω_i = 10000^(−2i/d) for the last axis' d (even) values (no randomness drawn).
+    /// with ω_i = 10000^(−2i/d) for the last axis' d (even) values (the generator advances as
+    /// for `Normal`, so the tensors after it start as they would after a learned one).
     SinCos,
 }
 
@@ -220,7 +221,12 @@ fn init_values(rng: &mut ChaCha8Rng, shape: &[usize], init: Init) -> Vec<f32> {
             normal(rng, n, (2.0 / fan_out as f64).sqrt())
         }
         Init::FanInUniform(fan_in) => uniform(rng, 1.0 / (fan_in.max(1) as f64).sqrt()),
-        Init::SinCos => sin_cos(shape),
+        Init::SinCos => {
+            // Draw (and drop) what the learned embedding's N(0, 0.02) would, so every later
+            // tensor starts as it does in the learned arm from the same seed.
+            let _ = normal(rng, n, 0.02);
+            sin_cos(shape)
+        }
     }
 }
 

@@ -295,8 +295,8 @@ impl Trainer {
         self.step_inspect(&mut |_, _| {})
     }
 
-    /// [`Trainer::step`], showing `inspect` every parameter's gradient (by name, before
-    /// clipping and the update): for measurements of the training itself, such as the spread
+    /// [`Trainer::step`], showing `inspect` every trained parameter's gradient (by name, before
+    /// clipping and the update; fixed tables have none): for measurements of the training itself, such as the spread
     /// of gradient norms across blocks.
     pub fn step_inspect(
         &mut self,

@@ -130,7 +130,7 @@ impl AdamW {
         let bc1 = 1.0 - c.beta1.powi(self.step as i32);
         let bc2 = 1.0 - c.beta2.powi(self.step as i32);
         for ((p, mom), g) in self.params.iter().zip(self.moments.iter_mut()).zip(grads) {
-            let Some(g) = g else {
+            let (Some(g), false) = (g, p.frozen) else {
                 continue;
             };
             let wd = decay_of(p, &c);

@@ -1,5 +1,5 @@
-//! `--pos-embed sin-cos` on the PyTorch route: a run passing torch → Rust → torch keeps DiT's
-//! table as both trainers build it, untouched by either optimizer or EMA, while the learned
+//! `--pos-embed sin-cos` on the PyTorch route: a run passing torch (3 steps) → Rust (2) → torch
+//! (1) keeps DiT's table, untouched by either trainer's optimizer or EMA, while the learned
 //! weights train.
 
 use std::path::Path;
@@ -14,8 +14,13 @@ use super::{checkpoint, fixture, run_ok, train_cmd, TINY};
 
 const LIMIT: Duration = Duration::from_secs(300);
 
+/// `name` from the checkpoint `dir`'s EMA weights.
 fn tensor(dir: &Path, name: &str) -> Vec<f32> {
-    let w = candle_core::safetensors::load(dir.join("model.safetensors"), &Device::Cpu).unwrap();
+    read(dir, "model.safetensors", name)
+}
+
+fn read(dir: &Path, file: &str, name: &str) -> Vec<f32> {
+    let w = candle_core::safetensors::load(dir.join(file), &Device::Cpu).unwrap();
     w[name].flatten_all().unwrap().to_vec1::<f32>().unwrap()
 }
 
@@ -26,24 +31,21 @@ fn a_sin_cos_run_passes_torch_rust_torch_with_its_table_fixed() {
     let _ = std::fs::remove_dir_all(&run);
     let ds = f.dataset.to_str().unwrap().to_string();
     let out = run.to_str().unwrap().to_string();
-    let mut args = vec![ds.as_str(), "--pos-embed", "sin-cos", "--steps", "2"];
+    let mut args = vec![ds.as_str(), "--pos-embed", "sin-cos", "--steps", "3"];
     args.extend(["--checkpoint-every", "1", "--out", &out]);
     args.extend(TINY);
     run_ok(train_cmd(1, &args), LIMIT);
     let handover = f.dir.join("sincos-handover");
     copy_run(&run, &handover);
     let mut rust = std::process::Command::new(scaledp_bin());
-    rust.args(["train", "--resume"]).arg(&handover).args([
-        "--steps",
-        "3",
-        "--checkpoint-every",
-        "1",
-    ]);
+    rust.args(["train", "--resume"])
+        .arg(&handover)
+        .args(["--steps", "5"]);
     run_ok(rust, LIMIT);
     let h = handover.to_str().unwrap();
-    run_ok(train_cmd(1, &["--resume", h, "--steps", "4"]), LIMIT);
+    run_ok(train_cmd(1, &["--resume", h, "--steps", "6"]), LIMIT);
 
-    // torch's table (float64, then float32) against the Rust builder's, row p = [sin, cos].
+    // torch's table (float64, then float32) against DiT's formula, row p = [sin, cos].
     let first = tensor(&checkpoint(&handover, 1), "pos_embed");
     let d = 32;
     let rows = first.len() / d;
@@ -62,20 +64,23 @@ fn a_sin_cos_run_passes_torch_rust_torch_with_its_table_fixed() {
             }
         }
     }
-    for step in [2, 3, 4] {
+    // Both the EMA copy and the trained weights, after every step of both trainers.
+    for step in 2..=6 {
         let dir = checkpoint(&handover, step);
         assert_eq!(
             tensor(&dir, "pos_embed"),
             first,
-            "step {step} moved the table"
+            "step {step} moved the EMA table"
         );
+        let trained = read(&dir, "train_state.safetensors", "params.pos_embed");
+        assert_eq!(trained, first, "step {step} trained the table");
     }
     assert_ne!(
         tensor(&checkpoint(&handover, 1), "x_embedder.weight"),
-        tensor(&checkpoint(&handover, 4), "x_embedder.weight"),
+        tensor(&checkpoint(&handover, 6), "x_embedder.weight"),
         "the learned weights train"
     );
     let policy = Policy::load(&handover, &Device::Cpu).unwrap();
     assert_eq!(policy.config().model.pos_embed, PosEmbed::SinCos);
-    assert_eq!(policy.config().step, 4);
+    assert_eq!(policy.config().step, 6);
 }

@@ -282,6 +282,10 @@ pub fn run(a: TrainArgs) -> Result<ExitStatus> {
             if let Some(at) = &a.attention {
                 cfg.attention = at.parse()?;
             }
+            if let Some(p) = &a.pos_embed {
+                cfg.pos_embed = p.parse()?;
+                cfg.validate()?;
+            }
             cfg.obs_horizon = a.obs_horizon.unwrap_or(cfg.obs_horizon);
             cfg.action_chunk = a.action_chunk.unwrap_or(cfg.action_chunk);
             print_counts("paper setup (3 cameras, 14-D state and action)", &cfg)?;

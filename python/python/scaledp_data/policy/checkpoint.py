@@ -219,6 +219,7 @@ def read_config(ckpt: str) -> Dict[str, Any]:
     if isinstance(cfg.get("model"), dict):
         cfg["model"].setdefault("arch", "scale_dp")
         cfg["model"].setdefault("dropout", 0.0)
+        cfg["model"].setdefault("pos_embed", "learned")
     if cfg.get("format") != FORMAT:
         raise ValueError(f"{path}: format {cfg.get('format')!r}, not a {FORMAT} checkpoint")
     if cfg.get("version") != VERSION:

@@ -391,10 +391,9 @@ class ScaleDPPolicy(ImagePolicy):
                     bound = math.sqrt(6.0 / (m.in_features + m.out_features))
                     m.weight.copy_(torch.rand(m.weight.shape, generator=g) * 2 * bound - bound)
                     m.bias.zero_()
+            normal(self.pos_embed, 0.02)  # drawn either way: later tensors start alike
             if self.fixed_pos:
                 self.pos_embed.copy_(sin_cos(*self.pos_embed.shape[1:]).unsqueeze(0))
-            else:
-                normal(self.pos_embed, 0.02)
             for lin in (self.cond_obs_emb, self.t_embedder.mlp[0], self.t_embedder.mlp[2]):
                 normal(lin.weight, 0.02)
             for blk in self.blocks:

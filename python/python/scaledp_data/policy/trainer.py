@@ -113,6 +113,7 @@ def _legacy(o: Dict[str, Any]) -> Dict[str, Any]:
     o.setdefault("attention", "non_causal")
     o.setdefault("arch", "scale_dp")
     o.setdefault("dropout", None)
+    o.setdefault("pos_embed", "learned")
     return o
 
 
