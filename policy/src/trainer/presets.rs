@@ -44,8 +44,9 @@ fn cpu_metaworld(o: TrainOptions) -> TrainOptions {
 /// The ALOHA benchmark's one recipe (both tasks, every arm): `cpu-sim` at the rig's 128×96 top
 /// camera (crops of 115×86), with chunks of 32 actions (0.64 s, half of them executed): 16 would
 /// be a third of a second at 50 Hz, where diffusion_policy's 16 at 10 Hz span 1.6 s and ACT's
-/// chunks 2 s. 2,500 steps keep the slowest arm inside the two hours a task and arm may take:
-/// a step took 1.26 s (Ti), 1.73 s (DP-T) and 2.75 s (S) on two cores, so S trains in 1.9 h.
+/// chunks 2 s. 2,500 steps: a step took 1.26 s (Ti), 1.73 s (DP-T) and 2.97 s (S) on two
+/// cores, so Ti and DP-T train in 0.9–1.2 h and S in 2.1 h, just over the two hours a task and
+/// arm may take (its transfer-cube run: 2.09 h).
 /// Over 50 demonstrations of ~6–8 s at 50 Hz (~17,000 samples) that is ~9 epochs.
 fn cpu_aloha(o: TrainOptions) -> TrainOptions {
     cpu_sim(o)
