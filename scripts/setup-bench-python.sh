@@ -2,9 +2,10 @@
 # Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline (the
 # LeRobotDataset + torch DataLoader route on the same dataset) and for the video conformance
 # tests (datasets/tests/lerobot_video.rs: frames of a dataset LeRobot wrote, as LeRobot returns
-# them). It pulls torch from PyPI (about 4.6 GB of wheels, CUDA libraries included); a second
-# run finds everything installed. `scaledp bench load` and the tests find it at
-# .venv-bench/bin/python (or set SCALEDP_BENCH_PYTHON).
+# them). It pulls torch from PyPI (about 4.6 GB of wheels, 8.3 GB installed, CUDA libraries
+# included: PyPI has no CPU-only torch for Linux); a second run finds everything installed.
+# `scaledp bench load` and the tests find it at .venv-bench/bin/python (or set
+# SCALEDP_BENCH_PYTHON).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -18,17 +19,49 @@ if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.ve
   echo "bench python ready: lerobot ${LEROBOT_VERSION} (installed)"
   exit 0
 fi
-.venv-bench/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
-# --no-cache-dir: a fresh machine would otherwise keep a second copy of those 4.6 GB in pip's
-# cache, and CI's disk is shared with a release build of ~90 executables. pip holds every
-# downloaded wheel until the install ends: its temporary files go beside the venv, on the disk
-# this script reports on, rather than in a /tmp that may be a small tmpfs.
+free_gb() { df -Pk . | awk 'NR == 2 {printf "%.1f\n", $4 / 1048576}'; }
+fail() {
+  echo "scripts/setup-bench-python.sh: $1 with $(free_gb) GB free on $(df -Pk . | awk 'NR == 2 {print $6}'); installing LeRobot ${LEROBOT_VERSION} needs about 9.5 GB there (8.3 GB installed, one wheel of up to 0.9 GB at a time); run it again once there is room (it resumes)" >&2
+  exit 1
+}
+# Say so now rather than after gigabytes of downloads. What is installed already counts.
+have=$(du -sk .venv-bench | awk '{printf "%.1f\n", $1 / 1048576}')
+if awk -v f="$(free_gb)" -v h="$have" 'BEGIN {exit !(f + h < 9.5)}'; then
+  fail "not enough disk to start"
+fi
+pip() {
+  # --no-cache-dir: pip's cache would keep a second copy of the wheels, on a disk shared with
+  # a release build of ~90 executables. Its temporary files go beside the venv, on the disk
+  # this script checks, rather than in a /tmp that may be a small tmpfs.
+  TMPDIR="$PWD/$tmp" .venv-bench/bin/python -m pip --disable-pip-version-check "$@"
+}
 tmp=.venv-bench/pip-tmp
 mkdir -p "$tmp"
 trap 'rm -rf "$tmp"' EXIT
-if ! TMPDIR="$PWD/$tmp" .venv-bench/bin/python -m pip install --no-cache-dir --disable-pip-version-check "lerobot==${LEROBOT_VERSION}"; then
-  read -r free mount < <(df -Pk . | awk 'NR == 2 {printf "%.1f %s\n", $4 / 1048576, $6}')
-  echo "scripts/setup-bench-python.sh: installing lerobot ${LEROBOT_VERSION} failed with ${free} GB free on ${mount}; it needs about 13 GB there while installing (4.6 GB of wheels, 8.3 GB installed); run it again once there is room (it resumes)" >&2
-  exit 1
-fi
+pip install --quiet --upgrade pip
+# One pip install holds every wheel it downloaded until it ends: 4.6 GB on top of the 8.3 GB
+# it unpacks (CI failed here with 4.3 GB free after the wheels were gone). So pip resolves the
+# whole set first (metadata only), the heavy wheels (torch, triton, the CUDA libraries) are
+# installed one per call, at the versions that resolution chose, and the last call installs
+# LeRobot with the rest: the peak is what is installed plus one wheel.
+pip install --quiet --no-cache-dir --dry-run --ignore-installed --report "$tmp/plan.json" "lerobot==${LEROBOT_VERSION}" ||
+  fail "resolving lerobot ${LEROBOT_VERSION} failed"
+heavy=$(.venv-bench/bin/python - "$tmp/plan.json" <<'PY'
+import json, re, sys
+plan = json.load(open(sys.argv[1]))
+for item in plan["install"]:
+    meta = item["metadata"]
+    if re.match(r"(torch|triton|nvidia-|cuda-bindings)", meta["name"].lower()):
+        print(f"{meta['name']}=={meta['version']}")
+PY
+)
+n=$(echo "$heavy" | wc -l)
+i=0
+for req in $heavy; do
+  i=$((i + 1))
+  echo "setup-bench-python.sh: [$i/$n] $req ($(free_gb) GB free)"
+  pip install --quiet --no-cache-dir --no-deps "$req" || fail "installing $req failed"
+done
+echo "setup-bench-python.sh: lerobot ${LEROBOT_VERSION} and the rest ($(free_gb) GB free)"
+pip install --quiet --no-cache-dir "lerobot==${LEROBOT_VERSION}" || fail "installing lerobot ${LEROBOT_VERSION} failed"
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
