@@ -2,7 +2,7 @@
 # Creates .venv-bench with LeRobot (pinned) for `scaledp bench load`'s baseline (the
 # LeRobotDataset + torch DataLoader route on the same dataset) and for the video conformance
 # tests (datasets/tests/lerobot_video.rs: frames of a dataset LeRobot wrote, as LeRobot returns
-# them). It pulls torch from PyPI (about 4.6 GB of wheels, 8.3 GB installed, CUDA libraries
+# them). It pulls torch from PyPI (about 4.6 GB of wheels, 7.6 GB installed, CUDA libraries
 # included: PyPI has no CPU-only torch for Linux); a second run finds everything installed.
 # `scaledp bench load` and the tests find it at .venv-bench/bin/python (or set
 # SCALEDP_BENCH_PYTHON).
@@ -21,7 +21,7 @@ if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.ve
 fi
 free_gb() { df -Pk . | awk 'NR == 2 {printf "%.1f\n", $4 / 1048576}'; }
 fail() {
-  echo "scripts/setup-bench-python.sh: $1 with $(free_gb) GB free on $(df -Pk . | awk 'NR == 2 {print $6}'); installing LeRobot ${LEROBOT_VERSION} needs about 9.5 GB there (8.3 GB installed, one wheel of up to 0.9 GB at a time); run it again once there is room (it resumes)" >&2
+  echo "scripts/setup-bench-python.sh: $1 with $(free_gb) GB free on $(df -Pk . | awk 'NR == 2 {print $6}'); installing LeRobot ${LEROBOT_VERSION} needs about 9.5 GB there (8.3 GB while installing, one wheel of up to 0.9 GB at a time, 7.5 GB once done); run it again once there is room (it resumes)" >&2
   exit 1
 }
 # Say so now rather than after gigabytes of downloads. What is installed already counts.
@@ -60,8 +60,13 @@ i=0
 for req in $heavy; do
   i=$((i + 1))
   echo "setup-bench-python.sh: [$i/$n] $req ($(free_gb) GB free)"
-  pip install --quiet --no-cache-dir --no-deps "$req" || fail "installing $req failed"
+  # --no-compile: Python compiles what the tests import when they import it (LeRobot's
+  # dataset and torch's core), not all of torch's 276 MB of bytecode up front.
+  pip install --quiet --no-cache-dir --no-compile --no-deps "$req" || fail "installing $req failed"
 done
 echo "setup-bench-python.sh: lerobot ${LEROBOT_VERSION} and the rest ($(free_gb) GB free)"
 pip install --quiet --no-cache-dir "lerobot==${LEROBOT_VERSION}" || fail "installing lerobot ${LEROBOT_VERSION} failed"
+# triton (641 MB) is torch.compile's GPU code generator: nothing here compiles a model or has a
+# GPU (the tests and `bench load` run torch eager on the CPU), and `import torch` does not need it.
+pip uninstall --quiet --yes triton
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"

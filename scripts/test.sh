@@ -24,7 +24,8 @@ report() {
   printf 'total %d min %d s (exit %d)\n' $((($(date +%s) - start) / 60)) $((($(date +%s) - start) % 60)) "$rc"
 }
 trap report EXIT
-# A fresh clone used 14.4 GB here (the three venvs 10.4, target/ 4.0; cargo's registry aside):
+# A fresh clone used 14.4 GB at 764788e (the three venvs 10.4, target/ 4.0; cargo's registry aside;
+# LeRobot's venv is 0.7 GB smaller since):
 # say what the disk had, so a run that fills it is told apart from a failing test.
 free_disk() { df -Ph . | awk 'NR == 2 {print $4 " free on " $6}'; }
 echo "scripts/test.sh: $(free_disk) at the start"
