@@ -21,7 +21,7 @@ if .venv-bench/bin/python -c "import importlib.metadata as m, sys; sys.exit(m.ve
 fi
 free_gb() { df -Pk . | awk 'NR == 2 {printf "%.1f\n", $4 / 1048576}'; }
 fail() {
-  echo "scripts/setup-bench-python.sh: $1 with $(free_gb) GB free on $(df -Pk . | awk 'NR == 2 {print $6}'); installing LeRobot ${LEROBOT_VERSION} needs about 9.5 GB there (8.3 GB while installing, one wheel of up to 0.9 GB at a time, 7.5 GB once done); run it again once there is room (it resumes)" >&2
+  echo "scripts/setup-bench-python.sh: $1 with $(free_gb) GB free on $(df -Pk . | awk 'NR == 2 {print $6}'); installing LeRobot ${LEROBOT_VERSION} needs about 9.5 GB there (7.6 GB installed, one wheel of up to 0.9 GB at a time); run it again once there is room (it resumes)" >&2
   exit 1
 }
 # Say so now rather than after gigabytes of downloads. What is installed already counts.
@@ -39,34 +39,36 @@ tmp=.venv-bench/pip-tmp
 mkdir -p "$tmp"
 trap 'rm -rf "$tmp"' EXIT
 pip install --quiet --upgrade pip
-# One pip install holds every wheel it downloaded until it ends: 4.6 GB on top of the 8.3 GB
-# it unpacks (CI failed here with 4.3 GB free after the wheels were gone). So pip resolves the
-# whole set first (metadata only), the heavy wheels (torch, triton, the CUDA libraries) are
-# installed one per call, at the versions that resolution chose, and the last call installs
-# LeRobot with the rest: the peak is what is installed plus one wheel.
+# One pip install holds every wheel it downloaded until it ends: 4.6 GB on top of what it
+# unpacks (CI failed here with 4.3 GB free after the wheels were gone). So pip resolves the
+# whole set once (metadata only) and that plan is installed without resolving again: the
+# heavy wheels (torch and the CUDA libraries) one per call, then the rest in one call. The
+# peak is what is installed plus one wheel. The plan leaves out triton (641 MB),
+# torch.compile's GPU code generator: nothing here compiles a model or has a GPU (the tests
+# and `bench load` run torch eager on the CPU), and `import torch` does not need it.
 pip install --quiet --no-cache-dir --dry-run --ignore-installed --report "$tmp/plan.json" "lerobot==${LEROBOT_VERSION}" ||
   fail "resolving lerobot ${LEROBOT_VERSION} failed"
-heavy=$(.venv-bench/bin/python - "$tmp/plan.json" <<'PY'
+.venv-bench/bin/python - "$tmp" <<'PY'
 import json, re, sys
-plan = json.load(open(sys.argv[1]))
-for item in plan["install"]:
-    meta = item["metadata"]
-    if re.match(r"(torch|triton|nvidia-|cuda-bindings)", meta["name"].lower()):
-        print(f"{meta['name']}=={meta['version']}")
+tmp = sys.argv[1]
+plan = json.load(open(f"{tmp}/plan.json"))
+with open(f"{tmp}/heavy.txt", "w") as heavy, open(f"{tmp}/rest.txt", "w") as rest:
+    for item in plan["install"]:
+        name, version = item["metadata"]["name"], item["metadata"]["version"]
+        if name.lower() == "triton":
+            continue
+        heavy_one = re.match(r"(torch|nvidia-|cuda-bindings)", name.lower())
+        print(f"{name}=={version}", file=heavy if heavy_one else rest)
 PY
-)
-n=$(echo "$heavy" | wc -l)
+mapfile -t heavy < "$tmp/heavy.txt"
 i=0
-for req in $heavy; do
+for req in "${heavy[@]}"; do
   i=$((i + 1))
-  echo "setup-bench-python.sh: [$i/$n] $req ($(free_gb) GB free)"
+  echo "setup-bench-python.sh: [$i/${#heavy[@]}] $req ($(free_gb) GB free)"
   # --no-compile: Python compiles what the tests import when they import it (LeRobot's
   # dataset and torch's core), not all of torch's 276 MB of bytecode up front.
   pip install --quiet --no-cache-dir --no-compile --no-deps "$req" || fail "installing $req failed"
 done
 echo "setup-bench-python.sh: lerobot ${LEROBOT_VERSION} and the rest ($(free_gb) GB free)"
-pip install --quiet --no-cache-dir "lerobot==${LEROBOT_VERSION}" || fail "installing lerobot ${LEROBOT_VERSION} failed"
-# triton (641 MB) is torch.compile's GPU code generator: nothing here compiles a model or has a
-# GPU (the tests and `bench load` run torch eager on the CPU), and `import torch` does not need it.
-pip uninstall --quiet --yes triton
+pip install --quiet --no-cache-dir --no-deps -r "$tmp/rest.txt" || fail "installing lerobot ${LEROBOT_VERSION} failed"
 .venv-bench/bin/python -c "import torch, lerobot; from lerobot.datasets.lerobot_dataset import LeRobotDataset; print('bench python ready: lerobot', lerobot.__version__ if hasattr(lerobot, '__version__') else '${LEROBOT_VERSION}', 'torch', torch.__version__)"
