@@ -24,17 +24,20 @@ pub struct Arm {
 }
 
 impl Arm {
-    /// The paper's claim that holding this arm against the recipe's (ScaleDP-Ti, non-causal)
-    /// puts to the test; `None` for the recipe's own arm.
+    /// The claim that holding this arm against the recipe's (ScaleDP-Ti, non-causal) puts to
+    /// the test, saying whose it is (the paper's, or this repo's own hypothesis); `None` for the
+    /// recipe's own arm.
     pub fn claim(&self) -> Option<&'static str> {
         match self.name {
-            "ti-causal" => Some("non-causal attention above causal (Ti above this arm)"),
-            "s" => Some("a larger ScaleDP does better (this arm above Ti)"),
-            "dp-t" => Some("ScaleDP-Ti above DP-T, the paper's baseline"),
-            "dp-t-l12" | "dp-t-l14" => Some("ScaleDP-Ti above a deeper DP-T"),
+            "ti-causal" => {
+                Some("the paper's: non-causal attention above causal (Ti above this arm)")
+            }
+            "s" => Some("the paper's: a larger ScaleDP does better (this arm above Ti)"),
+            "dp-t" => Some("the paper's: ScaleDP-Ti above DP-T, its baseline"),
+            "dp-t-l12" | "dp-t-l14" => Some("the paper's: ScaleDP-Ti above a deeper DP-T"),
             // Not the paper's: a hypothesis from the ALOHA results (docs/experiments.md).
             "ti-sincos" => {
-                Some("none (here: fixed positions lift non-causal Ti, this arm above it)")
+                Some("this repo's: fixed positions lift non-causal Ti (this arm above it)")
             }
             _ => None,
         }

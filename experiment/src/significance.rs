@@ -1,6 +1,7 @@
 //! Whether an arm's test successes differ from the recipe arm's (ScaleDP-Ti's) on the same
 //! seeds: Fisher's exact test on the 2×2 table of successes and failures — the test for two
-//! small binomial samples — with the paper's claim each pairing puts to the test.
+//! small binomial samples — with the claim each pairing puts to the test and whose it is (the
+//! paper's, or this repo's own hypothesis).
 //!
 //! Each pairing is one training run against another, so p speaks to the evaluation's sampling
 //! noise only, not to the spread between training seeds (replicates, `--train-seed`, show that);
@@ -67,7 +68,7 @@ pub(crate) fn table(pairings: &[Pairing], with_task: bool) -> String {
     let mut md = format!(
         "\nEach arm against ScaleDP-Ti (`{RECIPE}`) on the same test seeds (each pair trained from the same seed): Fisher's exact test, \
          two-sided. Each p holds one training run against another, so it measures the \
-         evaluation's sampling noise, not the spread between training seeds.\n\n|{} arm | the paper's claim it tests | `{RECIPE}` | \
+         evaluation's sampling noise, not the spread between training seeds.\n\n|{} arm | the claim it tests (whose) | `{RECIPE}` | \
          arm | arm − `{RECIPE}` | p |\n|{}---|---|---|---|---|---|\n",
         if with_task { " task |" } else { "" },
         if with_task { "---|" } else { "" },
@@ -145,16 +146,28 @@ mod tests {
                     recipe: &ti,
                     other: &causal,
                 },
+                Pairing {
+                    task: "assembly",
+                    arm: "ti-sincos",
+                    seed: 0,
+                    recipe: &ti,
+                    other: &dpt,
+                },
             ],
             true,
         );
         assert!(
-            md.contains("| assembly | dp-t | ScaleDP-Ti above DP-T"),
+            md.contains("| assembly | dp-t | the paper's: ScaleDP-Ti above DP-T"),
             "{md}"
         );
         assert!(md.contains("| 18/50 | 6/50 | -24 points | 0.009 |"), "{md}");
         assert!(
             md.contains("| 18/50 | 0/50 | -36 points | < 0.001 |"),
+            "{md}"
+        );
+        // The repo's own hypotheses are not passed off as the paper's.
+        assert!(
+            md.contains("| assembly | ti-sincos | this repo's: fixed positions"),
             "{md}"
         );
         assert!(table(&[], true).is_empty());

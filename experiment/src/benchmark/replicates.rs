@@ -125,7 +125,7 @@ mod tests {
         );
         // Each pairing holds arms trained from the same seed.
         assert!(
-            md.contains("| transfer-cube | ti-causal | non-causal"),
+            md.contains("| transfer-cube | ti-causal | the paper's: non-causal"),
             "{md}"
         );
         assert!(md.contains("| 14/50 | 47/50 | +66 points |"), "{md}");
