@@ -8,8 +8,8 @@
 //! An episode is a success when the simulator reports success at any step (MetaWorld's
 //! `info["success"]`), and ends there or at the simulator's last step. The scripted expert
 //! (the ceiling control) runs the same loop with the simulator's own expert instead. A task
-//! whose reward counts stages (ALOHA's) also reports each episode's highest reward and, per
-//! stage, how many episodes reached it.
+//! whose simulator names stages (ALOHA's rewards, MetaWorld's flags) also reports each episode's
+//! furthest stage and, per stage, how many episodes reached it.
 
 use std::time::Instant;
 
@@ -78,16 +78,16 @@ pub(crate) fn with_simulator(hello: &Hello, mut report: EvalReport) -> EvalRepor
     report.simulator = Some(hello.versions.clone());
     let names = &hello.stages;
     if !names.is_empty() {
-        let highest: Vec<Option<f64>> = report.episodes.iter().map(|e| e.highest_reward).collect();
+        let highest: Vec<Option<f64>> = report.episodes.iter().map(|e| e.highest_stage).collect();
         report.stages = stage_counts(names, &highest);
     }
     report
 }
 
-/// The highest reward so far, for a simulator that names stages.
+/// The furthest stage so far, for a simulator that names stages.
 fn track(bridge: &Bridge, highest: &mut Option<f64>, obs: &Observation) {
     if !bridge.hello().stages.is_empty() {
-        *highest = Some(highest.map_or(obs.reward, |h| h.max(obs.reward)));
+        *highest = Some(highest.map_or(obs.stage, |h| h.max(obs.stage)));
     }
 }
 
@@ -138,7 +138,7 @@ pub fn run_bridge_eval(
         let mut success_at = None;
         loop {
             let t = ORIGIN_NS + obs.step * dt;
-            track(&bridge, &mut rep.highest_reward, &obs);
+            track(&bridge, &mut rep.highest_stage, &obs);
             feed(rig, &obs, t, &mut ctl, rollout.as_mut())?;
             if obs.success {
                 success_at = Some(obs.step);
@@ -223,10 +223,10 @@ pub fn run_bridge_expert(
         let mut obs = bridge.reset(seed, false)?;
         let end = last_step(&bridge, opts);
         let mut rep = EpisodeReport::empty(seed);
-        track(&bridge, &mut rep.highest_reward, &obs);
+        track(&bridge, &mut rep.highest_stage, &obs);
         while !obs.success && !obs.done && obs.step < end {
             obs = bridge.expert_step(false)?;
-            track(&bridge, &mut rep.highest_reward, &obs);
+            track(&bridge, &mut rep.highest_stage, &obs);
         }
         rep.success = obs.success;
         rep.time_to_success_s = obs.success.then_some(obs.step as f64 * s);

@@ -122,9 +122,14 @@ pub struct EpisodeReport {
     pub wall_s: f64,
     /// The rollout's MCAP file (`--recordings`).
     pub recording: Option<String>,
-    /// A staged task (ALOHA's): the highest reward of the episode (the stage it reached).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub highest_reward: Option<f64>,
+    /// A staged task (ALOHA's, MetaWorld's): the furthest stage the episode reached
+    /// ([`crate::StageCount`]). Read as `highest_reward` too, its name before MetaWorld had stages.
+    #[serde(
+        default,
+        alias = "highest_reward",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub highest_stage: Option<f64>,
 }
 
 /// The run's report (`--report` JSON).
@@ -188,7 +193,7 @@ impl EpisodeReport {
             halted_ticks: 0,
             wall_s: 0.0,
             recording: None,
-            highest_reward: None,
+            highest_stage: None,
         }
     }
 }

@@ -62,7 +62,7 @@ pub fn run_expert(
             halted_ticks: 0,
             wall_s: wall.elapsed().as_secs_f64(),
             recording: None,
-            highest_reward: None,
+            highest_stage: None,
         };
         on_episode(&ep);
         episodes.push(ep);

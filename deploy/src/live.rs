@@ -89,7 +89,7 @@ pub fn run_live(
             halted_ticks: st.halted_ticks,
             wall_s: wall.elapsed().as_secs_f64(),
             recording: None,
-            highest_reward: None,
+            highest_stage: None,
         };
         on_episode(&ep);
         episodes.push(ep);
@@ -176,7 +176,7 @@ pub fn run_bridge_live(
         ep.success = task.time_to_success_s.is_some();
         ep.time_to_success_s = task.time_to_success_s;
         ep.duration_s = task.t_s;
-        ep.highest_reward = task.highest_reward;
+        ep.highest_stage = task.highest_stage;
         ep.chunks = st.chunks;
         ep.commanded_ticks = st.commanded_ticks;
         ep.clamped_ticks = st.clamped_ticks;

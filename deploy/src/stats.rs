@@ -3,15 +3,17 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Episodes that reached one stage of a staged task (their highest reward at least `reward`),
+/// Episodes that reached one stage of a staged task (their highest stage at least `number`),
 /// as ACT's evaluation counts them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StageCount {
     /// What the stage is (`lifted`).
     pub stage: String,
-    /// The reward that marks it (1, 2, …).
-    pub reward: u32,
-    /// Episodes whose highest reward was at least `reward`.
+    /// Its number (1, 2, …; gym-aloha's reward that marks it). Read as `reward` too, the
+    /// name results written before MetaWorld had stages use.
+    #[serde(alias = "reward")]
+    pub number: u32,
+    /// Episodes whose highest stage was at least `number`.
     pub episodes: u64,
     /// Of all episodes (0–1).
     pub rate: f64,
@@ -19,23 +21,23 @@ pub struct StageCount {
     pub wilson_95: [f64; 2],
 }
 
-/// Per stage (`names[i]` is reward i + 1), the episodes whose highest reward reached it;
-/// episodes without a reward count as reaching none.
+/// Per stage (`names[i]` is stage i + 1), the episodes whose highest stage reached it;
+/// episodes without one count as reaching none.
 pub fn stage_counts(names: &[String], highest: &[Option<f64>]) -> Vec<StageCount> {
     let n = highest.len() as u64;
     names
         .iter()
         .enumerate()
         .map(|(i, name)| {
-            let reward = i as u32 + 1;
+            let number = i as u32 + 1;
             let k = highest
                 .iter()
-                .filter(|h| h.is_some_and(|h| h >= f64::from(reward)))
+                .filter(|h| h.is_some_and(|h| h >= f64::from(number)))
                 .count() as u64;
             let (lo, hi) = wilson_interval(k, n);
             StageCount {
                 stage: name.clone(),
-                reward,
+                number,
                 episodes: k,
                 rate: k as f64 / n.max(1) as f64,
                 wilson_95: [lo, hi],
@@ -85,16 +87,16 @@ mod tests {
     }
 
     #[test]
-    fn stages_count_episodes_whose_highest_reward_reached_them() {
+    fn stages_count_episodes_whose_highest_stage_reached_them() {
         let names: Vec<String> = ["touched", "lifted", "transferred"]
             .map(String::from)
             .to_vec();
-        // Highest rewards 0, 1, 3, 2, none: touched by 3, lifted by 2, transferred by 1.
+        // Furthest stages 0, 1, 3, 2, none: touched by 3, lifted by 2, transferred by 1.
         let highest = [Some(0.0), Some(1.0), Some(3.0), Some(2.0), None];
         let c = stage_counts(&names, &highest);
         let got: Vec<(&str, u32, u64)> = c
             .iter()
-            .map(|s| (s.stage.as_str(), s.reward, s.episodes))
+            .map(|s| (s.stage.as_str(), s.number, s.episodes))
             .collect();
         assert_eq!(
             got,
@@ -106,6 +108,12 @@ mod tests {
             [lo, hi]
         });
         assert!(stage_counts(&[], &highest).is_empty());
+        // Results written before the field was renamed (`reward`) still read.
+        let old: StageCount = serde_json::from_str(
+            r#"{"stage":"lifted","reward":2,"episodes":19,"rate":0.38,"wilson_95":[0.2,0.5]}"#,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!((old.number, old.episodes), (2, 19));
     }
 
     #[test]

@@ -63,7 +63,8 @@ fn sawyer_kinematics_match_metaworlds_hand_within_a_millimetre() {
 }
 
 /// A seed fixes the scene (the same pictures twice); another seed places the objects elsewhere;
-/// the expert's commands replayed through `step` reproduce its episode and its success.
+/// the expert's commands replayed through `step` reproduce its episode and its success; the
+/// expert's episode passes MetaWorld's stages in order (near the object, grasped, success).
 #[test]
 fn seeds_fix_scenes_and_the_experts_commands_replay_its_episode() {
     let rig = rig("pick-place");
@@ -80,14 +81,32 @@ fn seeds_fix_scenes_and_the_experts_commands_replay_its_episode() {
         a.images[0], c.images[0],
         "seeds 3 and 4 place the objects alike"
     );
+    assert_eq!(
+        bridge.hello().stages,
+        ["near the object", "grasped", "success"]
+    );
     let mut obs = bridge.reset(5, false).unwrap();
+    assert_eq!(obs.stage, 0.0, "nothing reached at the reset");
     let mut commands = Vec::new();
+    // The first step at which each stage, or a later one, was reached.
+    let mut first_at = [None; 4];
     while !obs.success && !obs.done {
         obs = bridge.expert_step(false).unwrap();
         assert_eq!(obs.commands.len(), 1);
         commands.push(obs.commands[0].clone());
+        let s = obs.stage as usize;
+        assert!(s <= 3 && obs.stage.fract() == 0.0, "stage {}", obs.stage);
+        for at in &mut first_at[..=s] {
+            at.get_or_insert(obs.step);
+        }
     }
     assert!(obs.success, "the expert solves pick-place seed 5");
+    assert_eq!(obs.stage, 3.0, "success is the last stage");
+    let [_, near, grasped, success] = first_at.map(Option::unwrap);
+    assert!(
+        near <= grasped && grasped < success,
+        "stages out of order: {first_at:?}"
+    );
     let end = obs.arms[0].flange;
     let mut replay = bridge.reset(5, false).unwrap();
     for c in &commands {

@@ -57,6 +57,7 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
             "{r}"
         );
         assert_eq!(r["test"]["episodes"], 2, "{r}");
+        assert_eq!(r["test"]["stages"].as_array().map(Vec::len), Some(3), "{r}");
         assert!(r["simulator"]["mujoco"].is_string(), "{r}");
         assert!(r["train_revision"].is_string(), "{r}");
         let lo = r["wilson_low"].as_f64().unwrap();
@@ -69,6 +70,12 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
     let c = read_json(&res.join("reach--controls.json"));
     let expert = &c["controls"]["scripted_expert"];
     assert_eq!(expert["episodes"], 2, "{c}");
+    // Every episode counts MetaWorld's stages (its own flags), the expert's and each arm's.
+    assert_eq!(expert["stages"].as_array().map(Vec::len), Some(3), "{c}");
+    assert_eq!(
+        expert["stages"][2]["stage"], "success",
+        "the last stage is the success: {c}"
+    );
     assert!(c["controls"]["untrained"]["episodes"] == 1, "{c}");
     assert!(c["controls"]["frozen_cameras"]["episodes"] == 1, "{c}");
     let table = std::fs::read_to_string(res.join("table.md")).unwrap();

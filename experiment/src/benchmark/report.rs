@@ -207,8 +207,9 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// For staged tasks (ALOHA's), the episodes of each arm and control that reached each stage
-/// (highest reward ≥ 1, 2, …), as ACT's evaluation reports them; empty for other tasks.
+/// For staged tasks (ALOHA's rewards, MetaWorld's flags), the episodes of each arm and control
+/// that reached each stage (furthest stage ≥ 1, 2, …), as ACT's evaluation reports them; empty
+/// for other tasks and for results scored before their simulator named stages.
 fn stages_table(tasks: &[(Level, String)], arms: &[&str], l: &Loaded) -> String {
     let mut md = String::new();
     for (_, task) in tasks {
@@ -236,7 +237,7 @@ fn stages_table(tasks: &[(Level, String)], arms: &[&str], l: &Loaded) -> String 
             continue;
         };
         md.push_str(&format!(
-            "\n{task}: test episodes that reached each stage (highest reward ≥ 1, 2, …):\n\n| |"
+            "\n{task}: test episodes that reached each stage (furthest stage ≥ 1, 2, …):\n\n| |"
         ));
         for s in &first.stages {
             md.push_str(&format!(" {} |", s.stage));

@@ -15,6 +15,10 @@
   2`` (0.094 m: the fingers' pads fully open).
 - The expert is MetaWorld's scripted policy (``metaworld.policies``); its action is reported as
   the command that reproduces it (the mocap target it sets and the opening it maps to).
+- Each step also reports how far the task got by MetaWorld's own flags (its ``info``): stage 1
+  ``near_object``, 2 ``grasp_success``, 3 ``success``, the furthest one true at this step, so an
+  evaluation can say where a failed episode stopped. Each task defines its flags (assembly's
+  ``grasp_success`` is its grab reward above 0.5, button-press's only says the fingers are open).
 - Cameras are rendered with ``mujoco.Renderer`` with shadows and multisampling off (about ten
   times cheaper, the picture barely changes); the ``corner*`` cameras come out upside down and
   are flipped.
@@ -34,6 +38,17 @@ from .protocol import Reply
 OPEN_WIDTH_M = 0.094
 ARM_JOINTS = [f"right_j{i}" for i in range(7)]
 GRIPPER_JOINTS = ["r_close", "l_close"]
+#: MetaWorld's own flags (every task's ``info`` has them), in the order a pick-and-place reaches
+#: them: the stages an evaluation counts episodes by (furthest stage >= s).
+STAGES = ["near the object", "grasped", "success"]
+
+
+def stage_of(info: Dict[str, Any]) -> int:
+    """The furthest of MetaWorld's flags true in one step's ``info`` (0 when none is)."""
+    for stage, flag in ((3, "success"), (2, "grasp_success"), (1, "near_object")):
+        if bool(info.get(flag, False)):
+            return stage
+    return 0
 
 
 class MetaWorldEnv:
@@ -85,6 +100,7 @@ class MetaWorldEnv:
             "cameras": self.camera_info,
             "arms": [{"joints": ARM_JOINTS, "gripper_joints": GRIPPER_JOINTS}],
             "versions": self.versions,
+            "stages": STAGES,
         }
 
     def _images(self, render: bool) -> List[bytes]:
@@ -114,6 +130,7 @@ class MetaWorldEnv:
             "success": bool(info.get("success", False)),
             "succeeded": self.success,
             "reward": float(info.get("reward", 0.0)),
+            "stage": stage_of(info),
             "done": self.step_index >= self.max_steps,
             "render": bool(render),
             "images": [{"camera": c, "width": self.width, "height": self.height}

@@ -83,9 +83,9 @@ pub struct LiveTask {
     /// Simulated seconds per wall-clock second over the last full second (over the run so far
     /// until a second has passed).
     pub real_time_factor: f64,
-    /// The highest reward of the episode so far, for a task whose reward counts stages
+    /// The furthest stage of the episode so far, for a simulator that names stages
     /// ([`super::Hello::stages`]).
-    pub highest_reward: Option<f64>,
+    pub highest_stage: Option<f64>,
 }
 
 struct Shared {
@@ -321,7 +321,7 @@ fn run(
             success_at = Some(obs.step);
         }
         if staged {
-            highest = Some(highest.map_or(obs.reward, |h: f64| h.max(obs.reward)));
+            highest = Some(highest.map_or(obs.stage, |h: f64| h.max(obs.stage)));
         }
         let window_s = rtf_mark.0.elapsed().as_secs_f64();
         let window_rtf = (stamp - rtf_mark.1) as f64 / 1e9 / window_s.max(1e-9);
@@ -340,7 +340,7 @@ fn run(
             time_to_success_s: success_at.map(|k| k as f64 * s),
             done: obs.done,
             real_time_factor: rtf,
-            highest_reward: highest,
+            highest_stage: highest,
         };
         if last_status.elapsed() >= Duration::from_millis(100) {
             last_status = Instant::now();

@@ -48,8 +48,9 @@ pub struct Hello {
     /// Package versions (`metaworld`, `mujoco`, …): recorded with every result.
     #[serde(default)]
     pub versions: BTreeMap<String, String>,
-    /// A task whose reward counts stages (gym-aloha's 0–4): the name of reward 1, 2, …, its
-    /// last the success. Empty when the reward is shaped (MetaWorld's).
+    /// A task whose progress counts stages: the name of stage 1, 2, …, its last the success
+    /// (gym-aloha's rewards 1–4; MetaWorld's `near_object`, `grasp_success`, `success` flags).
+    /// Empty when the simulator names none.
     #[serde(default)]
     pub stages: Vec<String>,
     /// The cameras as the simulator renders them.
@@ -102,6 +103,8 @@ struct Header {
     #[serde(default)]
     reward: f64,
     #[serde(default)]
+    stage: Option<f64>,
+    #[serde(default)]
     done: bool,
     #[serde(default)]
     render: bool,
@@ -120,8 +123,11 @@ pub struct Observation {
     pub success: bool,
     /// The task has been a success at some step of this episode.
     pub succeeded: bool,
-    /// The task's reward at this step (a stage count when [`Hello::stages`] names them).
+    /// The task's reward at this step.
     pub reward: f64,
+    /// The stage the task is at this step when [`Hello::stages`] names them (0: none yet): the
+    /// simulator's `stage`, else its reward (gym-aloha's reward counts stages).
+    pub stage: f64,
     /// The episode has taken the simulator's last step.
     pub done: bool,
     /// Per rig camera, its RGB pixels (empty when the step was not rendered).
@@ -413,6 +419,7 @@ impl Bridge {
             success: h.success,
             succeeded: h.succeeded,
             reward: h.reward,
+            stage: h.stage.unwrap_or(h.reward),
             done: h.done,
             images,
             commands,

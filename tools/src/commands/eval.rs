@@ -216,8 +216,8 @@ fn with_progress(
             ),
         };
         let reward = e
-            .highest_reward
-            .map_or(String::new(), |r| format!(", highest reward {r}"));
+            .highest_stage
+            .map_or(String::new(), |r| format!(", furthest stage {r}"));
         let line = format!(
             "seed {}: {outcome}{reward}, {:.1} s simulated, {} chunks, {} clamped ticks, {:.1} s wall",
             e.seed, e.duration_s, e.chunks, e.clamped_ticks, e.wall_s
@@ -286,7 +286,7 @@ fn finish(
             .map(|s| format!("{} {}/{}", s.stage, s.episodes, report.episodes.len()))
             .collect();
         println!(
-            "stages reached (highest reward ≥ 1, 2, …): {}",
+            "stages reached (furthest stage ≥ 1, 2, …): {}",
             stages.join(", ")
         );
     }
