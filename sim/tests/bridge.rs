@@ -1,12 +1,14 @@
 //! MetaWorld behind the bridge protocol (needs `.venv-sims`: `scripts/setup-sims.sh`, which
 //! `scripts/test.sh` runs): the Sawyer's forward kinematics against MetaWorld's own hand pose,
-//! seeds that fix a scene, the expert's commands replayed through `step`, and clear errors.
+//! seeds that fix a scene, the expert's commands replayed through `step`, episodes that do not
+//! inherit the last one's gripper, and clear errors.
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
 use glam::{DMat3, DQuat};
 use scaledp_converter::live::ArmKinematics;
 use scaledp_schema::Rig;
 use scaledp_sim::bridge::Bridge;
+use scaledp_sim::ArmCommand;
 
 fn rig(task: &str) -> Rig {
     Rig::load_or_builtin(&format!("metaworld/{task}")).unwrap()
@@ -119,6 +121,45 @@ fn seeds_fix_scenes_and_the_experts_commands_replay_its_episode() {
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, f64::max);
     assert!(gap < 1e-6, "the replay ends {gap} away");
+}
+
+/// An episode does not inherit the last one's gripper: steps without a gripper command hold
+/// the reset's open fingers, whatever the previous episode's last command was (an evaluation's
+/// episodes run in one bridge, and its first ticks, before the first chunk, send none).
+#[test]
+fn a_reset_forgets_the_previous_episodes_gripper() {
+    let rig = rig("pick-place");
+    let mut bridge = Bridge::spawn(&rig).unwrap();
+    // Fingers after ten uncommanded steps from seed 5's reset.
+    fn fingers_after_reset(bridge: &mut Bridge) -> Vec<f64> {
+        bridge.reset(5, false).unwrap();
+        let hold = [ArmCommand::default()];
+        let mut obs = bridge.step(&hold, false).unwrap();
+        for _ in 0..9 {
+            obs = bridge.step(&hold, false).unwrap();
+        }
+        obs.arms[0].gripper_q.clone()
+    }
+    let fresh = fingers_after_reset(&mut bridge);
+    // An episode that ends with the gripper commanded shut.
+    bridge.reset(5, false).unwrap();
+    let shut = [ArmCommand {
+        gripper_width_m: Some(0.0),
+        ..ArmCommand::default()
+    }];
+    let mut closed = Vec::new();
+    for _ in 0..10 {
+        closed = bridge.step(&shut, false).unwrap().arms[0].gripper_q.clone();
+    }
+    assert!(
+        closed.iter().zip(&fresh).any(|(c, f)| (c - f).abs() > 1e-3),
+        "shutting the gripper moved no finger: {closed:?} against {fresh:?}"
+    );
+    let after = fingers_after_reset(&mut bridge);
+    assert_eq!(
+        after, fresh,
+        "the next episode started from the shut gripper"
+    );
 }
 
 /// Bad input is one clear error and the bridge keeps serving; an unknown task names the valid

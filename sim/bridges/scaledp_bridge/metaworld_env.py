@@ -91,6 +91,8 @@ class MetaWorldEnv:
         self.step_index = 0
         self.max_steps = int(self.env.max_path_length)
         self.success = False
+        #: The gripper action (+1 closes, -1 opens) a step without a gripper command holds.
+        self._last_grip = -1.0
 
     def hello(self) -> Dict[str, Any]:
         return {
@@ -144,6 +146,9 @@ class MetaWorldEnv:
         self.obs, info = self.env.reset()
         self.step_index = 0
         self.success = False
+        # A step without a gripper command holds the last one: a new episode starts from
+        # MetaWorld's reset (fingers open), never from where the previous episode left them.
+        self._last_grip = -1.0
         return self._observation(req.get("render", True), {})
 
     def _act(self, action: np.ndarray, render: bool) -> Reply:
@@ -175,8 +180,6 @@ class MetaWorldEnv:
             action[3] = self._last_grip
         self._last_grip = action[3]
         return self._act(action, req.get("render", True))
-
-    _last_grip = -1.0
 
     def expert_step(self, req: Dict[str, Any]) -> Reply:
         a = np.asarray(self.expert.get_action(self.obs), dtype=np.float64)
