@@ -215,11 +215,11 @@ fn with_progress(
                     .join(", ")
             ),
         };
-        let reward = e
+        let stage = e
             .highest_stage
             .map_or(String::new(), |r| format!(", furthest stage {r}"));
         let line = format!(
-            "seed {}: {outcome}{reward}, {:.1} s simulated, {} chunks, {} clamped ticks, {:.1} s wall",
+            "seed {}: {outcome}{stage}, {:.1} s simulated, {} chunks, {} clamped ticks, {:.1} s wall",
             e.seed, e.duration_s, e.chunks, e.clamped_ticks, e.wall_s
         );
         bar.suspend(|| println!("{line}"));
