@@ -103,6 +103,12 @@ pub struct CompareArgs {
     /// recipe's arm.
     #[arg(long)]
     pub no_controls: bool,
+    /// Train nothing: score the tasks' finished (task, arm) results and their controls again
+    /// with this build (the same checkpoints, seeds and settings), after a change to the
+    /// simulator's bridge; each file keeps its earlier figures in `earlier_scores`. The table
+    /// marks results scored by an older bridge than the newest among them.
+    #[arg(long, requires = "benchmark")]
+    pub rescore: bool,
     /// Longest evaluation episode (simulated s).
     #[arg(long, default_value_t = 30.0)]
     pub max_seconds: f64,

@@ -20,6 +20,9 @@ pub struct EvalPlan {
     pub max_seconds: f64,
     /// Actions executed per chunk.
     pub action_steps: usize,
+    /// Run every evaluation again even where a cache file holds it, and cache the new one (a
+    /// re-score with this build's simulator).
+    pub fresh: bool,
 }
 
 impl EvalPlan {
@@ -86,7 +89,7 @@ pub fn checkpoint(
         )
         .to_lowercase(),
     );
-    if let Some(r) = cached(&path) {
+    if let Some(r) = cached(&path).filter(|_| !plan.fresh) {
         return Ok(r);
     }
     let policy = Policy::load(checkpoint, &Device::Cpu)?;
@@ -127,7 +130,7 @@ pub fn expert(
     let opts = plan.options(split, episodes, false);
     let path = dir
         .join(format!("eval-expert-{split:?}-seed{}-n{episodes}.json", opts.seed).to_lowercase());
-    if let Some(r) = cached(&path) {
+    if let Some(r) = cached(&path).filter(|_| !plan.fresh) {
         return Ok(r);
     }
     let b = bar(episodes, "scripted expert");

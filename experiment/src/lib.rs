@@ -171,6 +171,7 @@ fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
     let plan = EvalPlan {
         max_seconds: a.max_seconds,
         action_steps: st.action_steps,
+        fresh: false,
     };
     for &arm in &st.arms {
         eprintln!("== arm {}: {}", arm.name, arm.what);

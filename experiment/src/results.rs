@@ -7,6 +7,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::significance::{self, Pairing, RECIPE};
 
+/// The key of a bridged simulator's behaviour among its versions.
+pub const BRIDGE_VERSION: &str = "scaledp-bridge";
+
 /// One evaluation, condensed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EvalFigures {
@@ -39,6 +42,11 @@ pub struct EvalFigures {
     /// A staged task (ALOHA's): per stage, the episodes that reached it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub stages: Vec<scaledp_deploy::StageCount>,
+    /// A bridged simulator's behaviour (its `scaledp-bridge` version: raised whenever the
+    /// bridge changes in a way that can change an outcome); none from bridges before it was
+    /// reported, and from the built-in simulator.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bridge: Option<String>,
 }
 
 impl EvalFigures {
@@ -65,6 +73,11 @@ impl EvalFigures {
             e2e_ms_p50: r.e2e_ms_p50,
             wall_s: r.wall_s,
             stages: r.stages.clone(),
+            bridge: r
+                .simulator
+                .as_ref()
+                .and_then(|s| s.get(BRIDGE_VERSION))
+                .cloned(),
         }
     }
 
@@ -86,6 +99,7 @@ impl EvalFigures {
             e2e_ms_p50: None,
             wall_s: 1.0,
             stages: Vec::new(),
+            bridge: None,
         }
     }
 
@@ -307,6 +321,17 @@ impl Provenance {
             finished_utc: now_utc(),
         }
     }
+}
+
+/// Writes `value` as pretty JSON to `path` through a `.partial` file renamed over it, so an
+/// interrupted write leaves the earlier file whole.
+pub(crate) fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    let mut partial = path.as_os_str().to_owned();
+    partial.push(".partial");
+    let partial = std::path::PathBuf::from(partial);
+    std::fs::write(&partial, serde_json::to_vec_pretty(value)?)
+        .with_context(|| format!("writing {}", partial.display()))?;
+    std::fs::rename(&partial, path).with_context(|| format!("writing {}", path.display()))
 }
 
 /// The CPU model, core count and memory, from /proc.

@@ -74,6 +74,13 @@ fn experts_succeed_and_their_joint_commands_replay() {
         assert_eq!(a.images[0].len(), 128 * 96 * 3);
         assert_eq!(a.images, b.images, "{task}: seed {seed} twice");
         assert_ne!(a.images, c.images, "{task}: another seed moves the objects");
+        let behaviour = bridge.hello().versions.get("scaledp-bridge").cloned();
+        assert!(
+            behaviour
+                .as_deref()
+                .is_some_and(|v| v.parse::<u32>().is_ok()),
+            "{task}: {behaviour:?}"
+        );
         assert_eq!(
             bridge.hello().stages.len(),
             4,

@@ -73,6 +73,14 @@ fn seeds_fix_scenes_and_the_experts_commands_replay_its_episode() {
     let mut bridge = Bridge::spawn(&rig).unwrap();
     assert_eq!(bridge.step_ns(), 12_500_000, "MetaWorld steps at 80 Hz");
     assert!(bridge.hello().versions.contains_key("mujoco"));
+    // The bridge's behaviour, recorded with every result (a number, raised on each change).
+    let behaviour = bridge.hello().versions.get("scaledp-bridge").cloned();
+    assert!(
+        behaviour
+            .as_deref()
+            .is_some_and(|v| v.parse::<u32>().is_ok()),
+        "{behaviour:?}"
+    );
     let a = bridge.reset(3, true).unwrap();
     let b = bridge.reset(3, true).unwrap();
     let c = bridge.reset(4, true).unwrap();

@@ -3,7 +3,7 @@
 //! scripted expert through the recorder, converts them, trains ScaleDP-Ti and DP-T one step
 //! each, scores both on test seeds in simulated time (the simulator stepped once per control
 //! tick), runs the controls and rebuilds the table and the plot; a second run resumes from what
-//! is there. Needs `.venv-sims` (`scripts/setup-sims.sh`, which `scripts/test.sh` runs).
+//! is there, and a third (`--rescore`) scores every file again, keeping the earlier figures. Needs `.venv-sims` (`scripts/setup-sims.sh`, which `scripts/test.sh` runs).
 #![allow(clippy::unwrap_used)]
 
 use scaledp_tests::{cli_ok, live_episode, read_json, run_scaledp};
@@ -105,5 +105,36 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
     assert!(
         !again.contains("test "),
         "nothing re-scored: {again}\n(first: {first})"
+    );
+    // `--rescore` scores every finished file again (after a bridge change), keeping the old.
+    let rescore = [&args[..], &["--rescore"]].concat();
+    let out = cli_ok(&run_scaledp(&rescore, root), "compare --rescore");
+    assert_eq!(out.matches("(was ").count(), 2 + 3, "{out}");
+    for arm in ["ti", "dp-t"] {
+        let r = read_json(&res.join(format!("reach--{arm}.json")));
+        assert_eq!(r["earlier_scores"].as_array().map(Vec::len), Some(1), "{r}");
+        let before = &r["earlier_scores"][0];
+        assert_eq!(before["figures"]["episodes"], 2, "{r}");
+        assert!(before["simulator"]["mujoco"].is_string(), "{r}");
+        assert!(
+            r["test"]["bridge"].is_string(),
+            "the bridge's behaviour: {r}"
+        );
+        assert!(
+            r["rescore_command"]
+                .as_str()
+                .unwrap()
+                .ends_with("--rescore"),
+            "{r}"
+        );
+    }
+    let c = read_json(&res.join("reach--controls.json"));
+    assert_eq!(c["earlier_scores"].as_array().map(Vec::len), Some(1), "{c}");
+    assert_eq!(c["controls"]["untrained"]["episodes"], 1, "{c}");
+    assert_eq!(c["controls"]["scripted_expert"]["episodes"], 2, "{c}");
+    let table = std::fs::read_to_string(res.join("table.md")).unwrap();
+    assert!(
+        !table.contains('†'),
+        "one bridge behaviour throughout: {table}"
     );
 }

@@ -10,6 +10,7 @@
 mod kind;
 mod replicates;
 mod report;
+mod rescore;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -23,6 +24,7 @@ use scaledp_schema::{ActionSpace, Rig};
 use serde::{Deserialize, Serialize};
 
 pub(crate) use report::{is_benchmark, rebuild};
+pub use rescore::Earlier;
 
 use crate::arms::Arm;
 use crate::evaluate::{self, EvalPlan, Kind};
@@ -81,6 +83,12 @@ pub struct TaskResult {
     pub simulator: std::collections::BTreeMap<String, String>,
     /// Where and what ran (the revision that scored it).
     pub provenance: Provenance,
+    /// What the file said before each re-score (`compare --rescore`), the oldest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub earlier_scores: Vec<Earlier<EvalFigures>>,
+    /// The command of the latest re-score, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rescore_command: Option<String>,
 }
 
 /// A task's controls: `RESULTS/NAME/<task>--controls.json`.
@@ -96,6 +104,12 @@ pub struct TaskControls {
     pub controls: Controls,
     /// Where and what ran.
     pub provenance: Provenance,
+    /// What the file said before each re-score (`compare --rescore`), the oldest first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub earlier_scores: Vec<Earlier<Controls>>,
+    /// The command of the latest re-score, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rescore_command: Option<String>,
 }
 
 /// The file of (task, arm) trained from `seed`.
@@ -253,7 +267,11 @@ pub(crate) fn run(
     let plan = EvalPlan {
         max_seconds: a.max_seconds,
         action_steps: st.action_steps,
+        fresh: false,
     };
+    if a.rescore {
+        return rescore::run(a, st, bench, &results_dir, &plan);
+    }
     for task in &a.tasks {
         let level = bench.level(task)?;
         let rig = Rig::load_or_builtin(&bench.rig(task))?;
@@ -327,9 +345,10 @@ pub(crate) fn run(
                 train_revision: revision,
                 simulator: test.simulator.clone().unwrap_or_default(),
                 provenance: Provenance::now(),
+                earlier_scores: Vec::new(),
+                rescore_command: None,
             };
-            std::fs::write(&path, serde_json::to_vec_pretty(&result)?)
-                .with_context(|| format!("writing {}", path.display()))?;
+            results::write_json(&path, &result)?;
             println!(
                 "{task} {}: test {} after {} steps ({:.2} h of training); {}",
                 arm.name,
@@ -365,29 +384,54 @@ fn controls(
     if path.exists() {
         return Ok(());
     }
-    let ckpts = evaluate::checkpoints(&task_dir.join(arm.name))?;
-    let (Some((0, untrained)), Some((_, last))) = (ckpts.first(), ckpts.last()) else {
+    eprintln!("== {task}: controls");
+    let Some(scored) = score_controls(
+        rig,
+        task_dir,
+        arm.name,
+        a.test_episodes,
+        a.controls_episodes,
+        plan,
+    )?
+    else {
         return Ok(());
     };
-    eprintln!("== {task}: controls");
-    let n = a.controls_episodes;
-    let expert = evaluate::expert(task_dir, rig, Split::Test, a.test_episodes, plan)?;
-    let untrained = evaluate::checkpoint(untrained, Some(rig), Kind::Policy, Split::Test, n, plan)?;
-    let frozen = evaluate::checkpoint(last, Some(rig), Kind::Frozen, Split::Test, n, plan)?;
     let c = TaskControls {
         task: task.into(),
         level: level.into(),
         arm: arm.name.into(),
-        controls: Controls {
-            untrained: Some(EvalFigures::of(&untrained)),
-            frozen_cameras: Some(EvalFigures::of(&frozen)),
-            scripted_expert: Some(EvalFigures::of(&expert)),
-        },
+        controls: scored,
         provenance: Provenance::now(),
+        earlier_scores: Vec::new(),
+        rescore_command: None,
     };
-    std::fs::write(&path, serde_json::to_vec_pretty(&c)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    results::write_json(&path, &c)?;
     rebuild(results_dir)
+}
+
+/// The controls of a task on the test seeds: the scripted expert (`expert` episodes), the
+/// untrained weights of `arm`'s run and its last checkpoint with its cameras frozen (`n`
+/// each); none until the run has its step-0 and a later checkpoint.
+fn score_controls(
+    rig: &Rig,
+    task_dir: &Path,
+    arm: &str,
+    expert: u64,
+    n: u64,
+    plan: &EvalPlan,
+) -> Result<Option<Controls>> {
+    let ckpts = evaluate::checkpoints(&task_dir.join(arm))?;
+    let (Some((0, untrained)), Some((_, last))) = (ckpts.first(), ckpts.last()) else {
+        return Ok(None);
+    };
+    let expert = evaluate::expert(task_dir, rig, Split::Test, expert, plan)?;
+    let untrained = evaluate::checkpoint(untrained, Some(rig), Kind::Policy, Split::Test, n, plan)?;
+    let frozen = evaluate::checkpoint(last, Some(rig), Kind::Frozen, Split::Test, n, plan)?;
+    Ok(Some(Controls {
+        untrained: Some(EvalFigures::of(&untrained)),
+        frozen_cameras: Some(EvalFigures::of(&frozen)),
+        scripted_expert: Some(EvalFigures::of(&expert)),
+    }))
 }
 
 /// The command line that reproduces one (task, arm).

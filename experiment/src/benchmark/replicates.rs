@@ -2,7 +2,7 @@
 //! result is its own file; the table shows them side by side, pairs arms trained from the same
 //! seed, and averages seeds before tasks.
 
-use super::report::{pct, Level};
+use super::report::{marked, Level};
 use super::TaskResult;
 use crate::significance::{seed_suffix, Pairing, RECIPE};
 
@@ -20,14 +20,15 @@ pub(super) fn replicates<'a>(
     v
 }
 
-/// A table cell: one result as `pct`, replicates each with their training seed.
-pub(super) fn cell(rs: &[&TaskResult]) -> String {
+/// A table cell: one result as `pct` (marked when an older bridge than `newest` scored it),
+/// replicates each with their training seed.
+pub(super) fn cell(rs: &[&TaskResult], newest: u32) -> String {
     match rs {
         [] => "–".into(),
-        [r] => format!("{}{}", pct(&r.test), seed_suffix(r.train_seed)),
+        [r] => format!("{}{}", marked(&r.test, newest), seed_suffix(r.train_seed)),
         _ => rs
             .iter()
-            .map(|r| format!("seed {}: {}", r.train_seed, pct(&r.test)))
+            .map(|r| format!("seed {}: {}", r.train_seed, marked(&r.test, newest)))
             .collect::<Vec<_>>()
             .join("; "),
     }
@@ -98,6 +99,8 @@ mod tests {
                 machine: "m".into(),
                 finished_utc: "now".into(),
             },
+            earlier_scores: Vec::new(),
+            rescore_command: None,
         }
     }
 
@@ -145,8 +148,39 @@ mod tests {
     #[test]
     fn one_result_names_its_seed_only_when_not_the_default() {
         let (a, b) = (result("ti", 0, 14), result("ti", 2, 14));
-        assert_eq!(cell(&[&a]), "28 % (14/50, 10–90)");
-        assert_eq!(cell(&[&b]), "28 % (14/50, 10–90) (seed 2)");
-        assert_eq!(cell(&[]), "–");
+        assert_eq!(cell(&[&a], 1), "28 % (14/50, 10–90)");
+        assert_eq!(cell(&[&b], 1), "28 % (14/50, 10–90) (seed 2)");
+        assert_eq!(cell(&[], 1), "–");
+    }
+
+    /// A result scored by an earlier bridge than the newest in the table is marked, with a
+    /// note saying how to score it again; a table of one behaviour has no marks.
+    #[test]
+    fn results_of_an_older_bridge_are_marked() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |arm: &str, bridge: Option<&str>| {
+            let mut r = result(arm, 0, 20);
+            r.test.bridge = bridge.map(String::from);
+            let path = result_path(dir.path(), "transfer-cube", arm, 0);
+            std::fs::write(path, serde_json::to_vec(&r).unwrap()).unwrap();
+        };
+        write("ti", None);
+        write("dp-t", None);
+        rebuild(dir.path()).unwrap();
+        let md = std::fs::read_to_string(dir.path().join("table.md")).unwrap();
+        assert!(!md.contains('†'), "{md}");
+        write("dp-t", Some("2"));
+        rebuild(dir.path()).unwrap();
+        let md = std::fs::read_to_string(dir.path().join("table.md")).unwrap();
+        assert!(
+            md.contains(
+                "| bimanual | transfer-cube | 40 % (20/50, 10–90) † | 40 % (20/50, 10–90) |"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("--benchmark aloha --tasks <task> --rescore"),
+            "{md}"
+        );
     }
 }

@@ -96,6 +96,40 @@ pub(super) fn pct(f: &EvalFigures) -> String {
     )
 }
 
+/// The bridge behaviour that scored `f` (1 when it was scored before bridges reported one).
+fn behaviour(f: &EvalFigures) -> u32 {
+    f.bridge
+        .as_deref()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1)
+}
+
+/// The newest bridge behaviour among the results and controls, and whether any of them was
+/// scored by an older one.
+fn newest_behaviour(l: &Loaded) -> (u32, bool) {
+    let controls = l.controls.values().flat_map(|c| {
+        let c = &c.controls;
+        [&c.scripted_expert, &c.untrained, &c.frozen_cameras]
+            .into_iter()
+            .flatten()
+    });
+    let all: Vec<u32> = l
+        .results
+        .iter()
+        .map(|r| &r.test)
+        .chain(controls)
+        .map(behaviour)
+        .collect();
+    let newest = all.iter().copied().max().unwrap_or(1);
+    (newest, all.iter().any(|&b| b < newest))
+}
+
+/// `pct`, marked ` †` when an older bridge than `newest` scored it.
+pub(super) fn marked(f: &EvalFigures, newest: u32) -> String {
+    let mark = if behaviour(f) < newest { " †" } else { "" };
+    format!("{}{mark}", pct(f))
+}
+
 /// Rebuilds `table.md` and `success_by_level.svg` in `dir`.
 pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     let l = load(dir)?;
@@ -103,6 +137,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         bail!("{}: no task results yet", dir.display());
     }
     let arms = arms_of(&l.results);
+    let (newest, older) = newest_behaviour(&l);
     let mut tasks: Vec<(Level, String)> = l
         .results
         .iter()
@@ -125,7 +160,10 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     for (level, task) in &tasks {
         md.push_str(&format!("| {} | {task} |", level.label));
         for a in &arms {
-            md.push_str(&format!(" {} |", cell(&replicates(&l.results, task, a))));
+            md.push_str(&format!(
+                " {} |",
+                cell(&replicates(&l.results, task, a), newest)
+            ));
         }
         let c = l.controls.get(task).map(|c| &c.controls);
         for f in [
@@ -133,9 +171,21 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
             c.and_then(|c| c.untrained.as_ref()),
             c.and_then(|c| c.frozen_cameras.as_ref()),
         ] {
-            md.push_str(&format!(" {} |", f.map_or("–".into(), pct)));
+            md.push_str(&format!(
+                " {} |",
+                f.map_or("–".into(), |f| marked(f, newest))
+            ));
         }
         md.push('\n');
+    }
+    if older {
+        md.push_str(&format!(
+            "\n† Scored by an earlier behaviour of the simulator's bridge than the newest here \
+             ({newest}; what changed is listed at `BEHAVIOUR` in `sim/bridges/scaledp_bridge/`): \
+             `scaledp experiment compare --benchmark {} --tasks <task> --rescore` scores it again \
+             with this build.\n",
+            l.results[0].benchmark
+        ));
     }
     let pairings = pairings(&tasks, &arms, &l.results);
     md.push_str(&significance::table(&pairings, true));

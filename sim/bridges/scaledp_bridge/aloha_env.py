@@ -31,6 +31,11 @@ from .protocol import Reply
 FINGER_CLOSED_M = 0.01844
 FINGER_OPEN_M = 0.05800
 STEPS = 400
+#: The bridge's behaviour: raised whenever a change to this file can change an episode's
+#: outcome, reported in ``hello``'s versions as ``scaledp-bridge`` and recorded with every
+#: evaluation (``experiment compare --rescore`` scores a result of an earlier one again).
+#: 1: every result so far (``reset`` has always restored the held targets).
+BEHAVIOUR = "1"
 ARM_JOINTS = ["waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate"]
 TASKS = {"transfer-cube": "transfer_cube", "insertion": "insertion"}
 #: What each of gym-aloha's rewards 1-4 means (its ``get_reward``), the stages ACT's evaluation
@@ -185,7 +190,7 @@ class AlohaEnv:
         self.width, self.height = width, height
         self.renderer = mujoco.Renderer(self.physics.model.ptr, height, width)
         self.versions = {"gym-aloha": _version("gym-aloha"), "mujoco": mujoco.__version__,
-                         "dm-control": _version("dm_control")}
+                         "dm-control": _version("dm_control"), "scaledp-bridge": BEHAVIOUR}
         self.objects = None
         self.plan: List[np.ndarray] = []
         self.step_index = 0

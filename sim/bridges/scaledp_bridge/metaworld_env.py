@@ -41,6 +41,17 @@ GRIPPER_JOINTS = ["r_close", "l_close"]
 #: MetaWorld's own flags (every task's ``info`` has them), in the order a pick-and-place reaches
 #: them: the stages an evaluation counts episodes by (furthest stage >= s).
 STAGES = ["near the object", "grasped", "success"]
+#: The bridge's behaviour: raised whenever a change to this file can change an episode's
+#: outcome, reported in ``hello``'s versions as ``scaledp-bridge`` and recorded with every
+#: evaluation, so a result scored by an earlier behaviour shows as such (``experiment compare
+#: --rescore`` scores it again).
+#:
+#: - 1 (no ``scaledp-bridge`` version): ``reset`` kept the previous episode's gripper action, so
+#:   an evaluation's first uncommanded ticks closed the fingers after an episode that ended with
+#:   them shut (outcomes depended on the order of the episodes; the scripted expert, which
+#:   commands its gripper every step, was unaffected).
+#: - 2: ``reset`` opens the gripper.
+BEHAVIOUR = "2"
 
 
 def stage_of(info: Dict[str, Any]) -> int:
@@ -86,7 +97,7 @@ class MetaWorldEnv:
         self.renderer = mujoco.Renderer(m, height, width)
         self.mujoco = mujoco
         self.versions = {"metaworld": getattr(metaworld, "__version__", None) or _version("metaworld"),
-                         "mujoco": mujoco.__version__}
+                         "mujoco": mujoco.__version__, "scaledp-bridge": BEHAVIOUR}
         self.obs = None
         self.step_index = 0
         self.max_steps = int(self.env.max_path_length)
