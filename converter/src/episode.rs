@@ -340,7 +340,10 @@ fn camera_frames(
             histogram,
         })
     };
-    (0..rig.cameras.len()).into_par_iter().map(one).collect()
+    // Encoded in parallel, but the error reported is the first camera's in rig order, so the
+    // same bad input always reads the same way.
+    let each: Vec<Result<CameraFrames>> = (0..rig.cameras.len()).into_par_iter().map(one).collect();
+    each.into_iter().collect()
 }
 
 /// Converts one recording: picks the rig, aligns the camera and joint streams on a tick grid,

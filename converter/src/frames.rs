@@ -129,7 +129,10 @@ impl FrameStore for InMemory<'_> {
             }
             *o += 1;
         }
-        jobs.into_par_iter()
+        // Collected in order before the first error is taken, so a recording with several
+        // bad frames always names the earliest.
+        let each: Vec<Result<(FrameKey, EncodedFrame)>> = jobs
+            .into_par_iter()
             .map(|(o, m)| {
                 let e = encode_message(
                     path,
@@ -142,7 +145,8 @@ impl FrameStore for InMemory<'_> {
                 )?;
                 Ok(((m.topic.clone(), o), e))
             })
-            .collect()
+            .collect();
+        each.into_iter().collect()
     }
 }
 
