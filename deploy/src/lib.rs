@@ -11,8 +11,9 @@
 //!   the cameras rendered and the same core called synchronously — and reports the success
 //!   rate with its 95 % Wilson interval ([`stats`]); [`live`] runs the simulator and [`serve`]
 //!   over loopback Zenoh in real time instead. Seeds come in fixed ranges ([`Split`]): the
-//!   demonstrations' (0 …), validation (1 000 000 …, to choose checkpoints and tune) and test
-//!   (2 000 000 …, what is reported). [`run_expert`] scores the scripted teleoperator on the
+//!   demonstrations' (0 …), validation (1 000 000 …, to choose checkpoints and tune),
+//!   development (2 000 000 …, the old test range that pilots saw) and test (3 000 000 …, what
+//!   is reported). [`run_expert`] scores the scripted teleoperator on the
 //!   same seeds (the ceiling control); [`ControlOptions::freeze_cameras`] the vision control.
 //! - Rigs whose simulator runs behind the bridge protocol (`metaworld/<task>`) are evaluated
 //!   the same way, the simulator stepped once per control tick ([`run_eval`] dispatches).

@@ -191,7 +191,7 @@ fn the_scripted_expert_scores_on_the_same_seeds() {
     assert_eq!(a.mode, "scripted-expert");
     assert_eq!(
         a.episodes.iter().map(|e| e.seed).collect::<Vec<_>>(),
-        [2_000_000, 2_000_001, 2_000_002]
+        [3_000_000, 3_000_001, 3_000_002]
     );
     assert_eq!(a.successes, 3, "{:?}", a.episodes);
     for (x, y) in a.episodes.iter().zip(&b.episodes) {
@@ -204,9 +204,15 @@ fn the_scripted_expert_scores_on_the_same_seeds() {
         assert!((x.duration_s - t - opts.settle_s).abs() < 0.02, "{x:?}");
     }
     assert_eq!(
-        scaledp_deploy::Split::of(2_000_000, 50),
+        scaledp_deploy::Split::of(3_000_000, 50),
         Some(scaledp_deploy::Split::Test)
     );
+    assert_eq!(
+        scaledp_deploy::Split::of(2_000_000, 50),
+        Some(scaledp_deploy::Split::Dev)
+    );
+    // A range that runs from development into test seeds is neither.
+    assert_eq!(scaledp_deploy::Split::of(2_999_990, 50), None);
     assert_eq!(
         scaledp_deploy::Split::of(1_000_000, 50),
         Some(scaledp_deploy::Split::Val)

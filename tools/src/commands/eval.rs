@@ -1,7 +1,8 @@
 //! `scaledp eval`: a checkpoint's success rate on seeded episodes of the simulated task, in
 //! simulated time (see `scaledp_deploy::eval`). Episode i uses seed `first + i`, the first seed
-//! of the chosen split (`--split val`: 1 000 000, for choosing checkpoints and tuning; `test`:
-//! 2 000 000, for reporting) or `--seed`; both are far from `scaledp collect`'s (0, 1, …).
+//! of the chosen split (`--split val`: 1 000 000, for choosing checkpoints and tuning; `dev`:
+//! 2 000 000, the old test range, seen by pilots; `test`: 3 000 000, for reporting) or `--seed`;
+//! all are far from `scaledp collect`'s (0, 1, …).
 //! The seeds of the demonstrations a checkpoint was trained on are refused: those listed in
 //! `--collected`, and those of the `collect.jsonl` manifests beside the recordings its dataset
 //! was converted from (found through the dataset's `meta/info.json`). The controls: `--expert`
@@ -23,7 +24,9 @@ use crate::shared::{self, rig_for, ControlArgs};
 pub enum SplitArg {
     /// Validation seeds (1 000 000 …).
     Val,
-    /// Test seeds (2 000 000 …).
+    /// Development seeds (2 000 000 …: the test range until 2026-11-28, seen by pilots).
+    Dev,
+    /// Test seeds (3 000 000 …).
     Test,
 }
 
@@ -31,6 +34,7 @@ impl From<SplitArg> for Split {
     fn from(s: SplitArg) -> Split {
         match s {
             SplitArg::Val => Split::Val,
+            SplitArg::Dev => Split::Dev,
             SplitArg::Test => Split::Test,
         }
     }
@@ -49,8 +53,8 @@ pub struct EvalArgs {
     /// Episodes.
     #[arg(long, default_value_t = 50)]
     pub episodes: u64,
-    /// The seed range: val (from 1 000 000: choose checkpoints and tune on it) or test (from
-    /// 2 000 000: report it).
+    /// The seed range: val (from 1 000 000: choose checkpoints and tune on it), dev (from
+    /// 2 000 000: the old test range, seen by pilots) or test (from 3 000 000: report it).
     #[arg(long, value_enum, default_value = "test")]
     pub split: SplitArg,
     /// First seed instead of the split's: episode i uses seed + i.
