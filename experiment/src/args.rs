@@ -59,7 +59,8 @@ pub struct CompareArgs {
     /// or the benchmark's name).
     #[arg(long)]
     pub name: Option<String>,
-    /// Arms to run, comma-separated (ti, ti-causal, s, ti-sincos, dp-t, dp-t-l12, dp-t-l14),
+    /// Arms to run, comma-separated (ti, ti-causal, s, ti-sincos, ti-learned-sincos, ti-x3,
+    /// ti-causal-x3, dp-t, dp-t-l12, dp-t-l14),
     /// one after the other [ti,ti-causal,s; a benchmark: ti,dp-t].
     #[arg(long, value_delimiter = ',')]
     pub arms: Vec<String>,
@@ -92,7 +93,7 @@ pub struct CompareArgs {
     /// (0: the last checkpoint is scored, as the benchmarks do).
     #[arg(long)]
     pub val_episodes: Option<u64>,
-    /// Test episodes of the chosen checkpoint (seeds 2 000 000 …): the reported figure.
+    /// Test episodes of the chosen checkpoint (seeds 3 000 000 …): the reported figure.
     #[arg(long, default_value_t = 50)]
     pub test_episodes: u64,
     /// Episodes of the chosen checkpoint in real time over loopback Zenoh (`eval --live`), for

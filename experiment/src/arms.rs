@@ -19,6 +19,9 @@ pub struct Arm {
     pub attention: Attention,
     /// ScaleDP's positional embedding (learned, as the paper's; DP-T keeps its own).
     pub pos_embed: PosEmbed,
+    /// The recipe's optimizer steps times this (1; 3 for the budget arms, whose learning-rate
+    /// schedule stretches over the longer run).
+    pub steps_factor: u64,
     /// One line for the table.
     pub what: &'static str,
 }
@@ -39,13 +42,22 @@ impl Arm {
             "ti-sincos" => {
                 Some("this repo's: fixed positions lift non-causal Ti (this arm above it)")
             }
+            "ti-learned-sincos" => Some(
+                "this repo's: a learned pos_embed started at the tokens' scale lifts non-causal Ti (this arm above it)",
+            ),
+            "ti-x3" => Some("this repo's: non-causal Ti is short of steps (this arm above it)"),
+            "ti-causal-x3" => {
+                Some("this repo's: the mask's lead is the budget's (compare with ti-x3)")
+            }
             _ => None,
         }
     }
 
     /// The recipe `base` with this arm's denoiser.
     pub fn options(&self, base: TrainOptions) -> TrainOptions {
+        let steps = base.get_steps() * self.steps_factor;
         let o = base
+            .steps(steps)
             .arch(self.arch)
             .model(self.size)
             .attention(self.attention)
@@ -76,6 +88,7 @@ const fn scaledp(
         layers: None,
         attention,
         pos_embed: PosEmbed::Learned,
+        steps_factor: 1,
         what,
     }
 }
@@ -88,12 +101,13 @@ const fn dpt(name: &'static str, layers: Option<usize>, what: &'static str) -> A
         layers,
         attention: Attention::Causal,
         pos_embed: PosEmbed::Learned,
+        steps_factor: 1,
         what,
     }
 }
 
 /// Every arm, the recipe's first.
-pub const ARMS: [Arm; 7] = [
+pub const ARMS: [Arm; 10] = [
     scaledp(
         "ti",
         ModelSize::Ti,
@@ -119,6 +133,33 @@ pub const ARMS: [Arm; 7] = [
             ModelSize::Ti,
             Attention::NonCausal,
             "ScaleDP-Ti, non-causal, DiT's fixed sin-cos pos_embed (a follow-up, not the paper's model)",
+        )
+    },
+    Arm {
+        pos_embed: PosEmbed::LearnedSinCos,
+        ..scaledp(
+            "ti-learned-sincos",
+            ModelSize::Ti,
+            Attention::NonCausal,
+            "ScaleDP-Ti, non-causal, pos_embed learned from DiT's sin-cos table (a follow-up)",
+        )
+    },
+    Arm {
+        steps_factor: 3,
+        ..scaledp(
+            "ti-x3",
+            ModelSize::Ti,
+            Attention::NonCausal,
+            "ScaleDP-Ti, non-causal (the paper's), three times the recipe's steps",
+        )
+    },
+    Arm {
+        steps_factor: 3,
+        ..scaledp(
+            "ti-causal-x3",
+            ModelSize::Ti,
+            Attention::Causal,
+            "ScaleDP-Ti, causal attention, three times the recipe's steps",
         )
     },
     dpt(

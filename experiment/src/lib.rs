@@ -15,6 +15,7 @@
 
 mod args;
 mod arms;
+pub mod audit;
 mod benchmark;
 mod evaluate;
 mod grad_scale;
@@ -36,7 +37,7 @@ pub use grad_scale::GradScaleArgs;
 pub use results::{ArmResult, EvalFigures};
 
 use evaluate::{EvalPlan, Kind};
-use results::{Controls, Provenance, ValPoint};
+use results::{Controls, ValPoint};
 
 /// Runs one `scaledp experiment` command; `stop` (set by Ctrl-C) checkpoints a training run and
 /// returns.
@@ -159,11 +160,15 @@ fn command(a: &CompareArgs, st: &Settings, dataset: &str, arm: &str) -> String {
 
 fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
     let st = Settings::of(a)?;
+    // What lands under docs/results is committed: it must come from a committed tree.
+    let results_dir = a.results.join(&st.name);
+    if results_dir.components().any(|c| c.as_os_str() == "docs") {
+        audit::refuse_dirty(&results_dir)?;
+    }
     if a.benchmark.is_some() {
         return benchmark::run(a, &st, recipe(a, &st)?, stop);
     }
     let dataset = a.dataset.clone().context("--dataset (or --benchmark)")?;
-    let results_dir = a.results.join(&st.name);
     let runs_dir = a.runs.join(&st.name);
     std::fs::create_dir_all(&results_dir)
         .with_context(|| format!("creating {}", results_dir.display()))?;
@@ -177,6 +182,7 @@ fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
         eprintln!("== arm {}: {}", arm.name, arm.what);
         let opts = arm.options(base.clone());
         let run = runs_dir.join(arm.name);
+        let trainer = audit::record_trainer(&run)?;
         let trained = train::train(&dataset, &run, opts.clone(), stop)?;
         if trained.interrupted {
             eprintln!(
@@ -185,7 +191,8 @@ fn compare(a: &CompareArgs, stop: &Arc<AtomicBool>) -> Result<()> {
             );
             return Ok(());
         }
-        let result = evaluate_arm(a, &st, &dataset, arm, &run, &opts, &plan, trained)?;
+        let mut result = evaluate_arm(a, &st, &dataset, arm, &run, &opts, &plan, trained)?;
+        result.audit.trained_by = Some(trainer);
         let path = results_dir.join(format!("{}.json", arm.name));
         std::fs::write(&path, serde_json::to_vec_pretty(&result)?)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -315,7 +322,14 @@ fn evaluate_arm(
         test: figures,
         live,
         controls,
-        provenance: Provenance::now(),
+        audit: audit::Audit {
+            schema: audit::SCHEMA,
+            trained_by: None,
+            scored_by: audit::Binary::this(),
+            simulator: audit::simulator(&test),
+            collection: None,
+            train_seed: Some(opts.get_seed()),
+        },
     })
 }
 
@@ -365,15 +379,12 @@ fn rebuild(dir: &std::path::Path) -> Result<Vec<ArmResult>> {
         "# Results\n\nRebuilt by `scaledp experiment report` from the arm files beside it.\n\n",
     );
     md.push_str(&results::table(&arms));
-    md.push_str("\n| arm | commit | machine | finished | command |\n|---|---|---|---|---|\n");
+    md.push_str("\n| arm | scored by | machine | finished | command |\n|---|---|---|---|---|\n");
     for a in &arms {
+        let b = &a.audit.scored_by;
         md.push_str(&format!(
             "| {} | `{}` | {} | {} | `{}` |\n",
-            a.arm,
-            a.provenance.git_revision,
-            a.provenance.machine,
-            a.provenance.finished_utc,
-            a.command
+            a.arm, b.revision, b.machine, b.utc, a.command
         ));
     }
     std::fs::write(dir.join("table.md"), md)

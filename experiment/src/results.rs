@@ -47,6 +47,9 @@ pub struct EvalFigures {
     /// reported, and from the built-in simulator.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bridge: Option<String>,
+    /// Every episode, in seed order: what the figures above are counted from.
+    #[serde(default)]
+    pub outcomes: Vec<crate::audit::Outcome>,
 }
 
 impl EvalFigures {
@@ -78,15 +81,33 @@ impl EvalFigures {
                 .as_ref()
                 .and_then(|s| s.get(BRIDGE_VERSION))
                 .cloned(),
+            outcomes: crate::audit::outcomes(r),
         }
     }
 
-    /// A test fixture: `successes` of `episodes` in simulated time, interval 10–90 %.
+    /// A test fixture: `successes` of `episodes` in simulated time, interval 10–90 %, the
+    /// first `successes` seeds the successful ones.
     #[cfg(test)]
     pub(crate) fn counts(successes: u64, episodes: u64) -> Self {
+        let mut f = Self::pattern(&(0..episodes).map(|i| i < successes).collect::<Vec<_>>());
+        // Impossible counts (more successes than episodes) stay as given, for the tests that
+        // refuse them.
+        f.successes = successes;
+        f.success_rate = successes as f64 / episodes as f64;
+        f
+    }
+
+    /// A test fixture: one episode per entry, successful where `true`, from the first test seed.
+    #[cfg(test)]
+    pub(crate) fn pattern(success: &[bool]) -> Self {
+        let first_seed = scaledp_deploy::Split::Test.first_seed();
+        let (episodes, successes) = (
+            success.len() as u64,
+            success.iter().filter(|s| **s).count() as u64,
+        );
         EvalFigures {
             mode: "simulated-time".into(),
-            first_seed: 2_000_000,
+            first_seed,
             episodes,
             successes,
             success_rate: successes as f64 / episodes as f64,
@@ -100,6 +121,17 @@ impl EvalFigures {
             wall_s: 1.0,
             stages: Vec::new(),
             bridge: None,
+            outcomes: success
+                .iter()
+                .enumerate()
+                .map(|(i, &success)| crate::audit::Outcome {
+                    seed: first_seed + i as u64,
+                    success,
+                    highest_stage: None,
+                    steps_to_success: success.then_some(100),
+                    time_to_success_s: success.then_some(2.0),
+                })
+                .collect(),
         }
     }
 
@@ -194,8 +226,9 @@ pub struct ArmResult {
     pub live: Option<EvalFigures>,
     /// The controls, when run.
     pub controls: Controls,
-    /// Where and what ran.
-    pub provenance: Provenance,
+    /// Who trained and scored it (the demonstrations' collection is not known to a
+    /// `--dataset` comparison, so such a file cannot pass the schema until it names them).
+    pub audit: crate::audit::Audit,
 }
 
 /// Reads every `*.json` arm result in `dir`, in the arms' order.

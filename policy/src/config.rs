@@ -256,6 +256,11 @@ pub enum PosEmbed {
     /// DiT's `get_1d_sincos_pos_embed`: `[sin(p·ω), cos(p·ω)]` with ω_i = 10000^(−2i/d), fixed
     /// (rows of norm √(d/2), where a learned one starts near 0.02·√d).
     SinCos,
+    /// Learned as [`PosEmbed::Learned`] (same optimizer group: no weight decay, the run's
+    /// learning rate), but starting from the sin-cos table instead of N(0, 0.02): AdamW moves
+    /// each value by about the learning rate a step, so a table that starts at 0.02 stays faint
+    /// over a short run; this one starts at the scale of the tokens it is added to.
+    LearnedSinCos,
 }
 
 impl std::str::FromStr for PosEmbed {
@@ -264,8 +269,9 @@ impl std::str::FromStr for PosEmbed {
         match s.to_ascii_lowercase().replace(['-', '_'], "").as_str() {
             "learned" => Ok(PosEmbed::Learned),
             "sincos" => Ok(PosEmbed::SinCos),
+            "learnedsincos" => Ok(PosEmbed::LearnedSinCos),
             _ => Err(Error::Config(format!(
-                "pos_embed {s:?}: learned or sin-cos"
+                "pos_embed {s:?}: learned, sin-cos or learned-sin-cos"
             ))),
         }
     }
@@ -276,6 +282,7 @@ impl std::fmt::Display for PosEmbed {
         f.write_str(match self {
             PosEmbed::Learned => "learned",
             PosEmbed::SinCos => "sin-cos",
+            PosEmbed::LearnedSinCos => "learned-sin-cos",
         })
     }
 }
@@ -394,11 +401,12 @@ impl ModelConfig {
         if self.obs_horizon == 0 || self.action_chunk == 0 || self.action_dim == 0 {
             return bad("obs_horizon, action_chunk and the action width must be at least 1".into());
         }
-        if self.pos_embed == PosEmbed::SinCos {
+        if self.pos_embed != PosEmbed::Learned {
             if self.arch == Architecture::DpT {
-                return bad(
-                    "a fixed sin-cos pos_embed is a ScaleDP option; DP-T learns its own".into(),
-                );
+                return bad(format!(
+                    "a {} pos_embed is a ScaleDP option; DP-T learns its own from N(0, 0.02)",
+                    self.pos_embed
+                ));
             }
             if self.hidden % 2 != 0 {
                 return bad(format!(
@@ -465,6 +473,11 @@ mod tests {
             assert_eq!(s.parse::<PosEmbed>().ok(), Some(PosEmbed::SinCos), "{s}");
         }
         assert_eq!("learned".parse::<PosEmbed>().ok(), Some(PosEmbed::Learned));
+        assert_eq!(
+            "learned-sin-cos".parse::<PosEmbed>().ok(),
+            Some(PosEmbed::LearnedSinCos)
+        );
+        assert_eq!(PosEmbed::LearnedSinCos.to_string(), "learned-sin-cos");
         assert!("rope".parse::<PosEmbed>().is_err());
         let mut c = ModelConfig::new(ModelSize::Ti, vec![], (64, 64), 3, 2);
         c.pos_embed = PosEmbed::SinCos;

@@ -296,3 +296,36 @@ fn a_sin_cos_pos_embed_stays_fixed_while_the_rest_trains() {
     let policy = Policy::load(out.path(), &dev).unwrap();
     assert_eq!(policy.config().model.pos_embed, PosEmbed::SinCos);
 }
+
+/// `pos_embed: learned-sin-cos`: DiT's table at step 0, then trained with the other weights
+/// (the optimizer moves it), and recorded in the checkpoint.
+#[test]
+fn a_learned_sin_cos_pos_embed_starts_at_the_table_and_trains() {
+    let ds = common::write(&common::Fixture::default());
+    let dev = Device::Cpu;
+    let out = tempfile::tempdir().unwrap();
+    let opts = common::tiny().steps(5).pos_embed(PosEmbed::LearnedSinCos);
+    let mut t = Trainer::new(&ds.location(), out.path(), opts, &dev).unwrap();
+    let start = t.save_checkpoint().unwrap();
+    let end = t.run(|_| {}).unwrap().checkpoint.unwrap();
+    let read = |dir: &std::path::Path, file: &str, name: &str| {
+        let w = candle_core::safetensors::load(dir.join(file), &dev).unwrap();
+        w[name].flatten_all().unwrap().to_vec1::<f32>().unwrap()
+    };
+    let first = read(&start, "model.safetensors", "pos_embed");
+    // Width 32, chunk 4: the same table as the fixed embedding's at step 0.
+    for p in 0..4 {
+        for i in 0..16 {
+            let a = p as f64 * 10000f64.powf(-(i as f64) / 16.0);
+            assert_eq!(first[p * 32 + i], a.sin() as f32, "row {p}, sin {i}");
+            assert_eq!(first[p * 32 + 16 + i], a.cos() as f32, "row {p}, cos {i}");
+        }
+    }
+    let trained = read(&end, "train_state.safetensors", "params.pos_embed");
+    assert_ne!(
+        trained, first,
+        "the optimizer left the table where it started"
+    );
+    let policy = Policy::load(out.path(), &dev).unwrap();
+    assert_eq!(policy.config().model.pos_embed, PosEmbed::LearnedSinCos);
+}

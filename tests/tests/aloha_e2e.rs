@@ -74,7 +74,19 @@ fn transfer_cube_collects_converts_in_both_spaces_trains_and_scores() {
     assert_eq!(r["demonstrations"], 2, "{r}");
     assert_eq!(r["steps"], 1, "{r}");
     assert_eq!(r["test"]["episodes"], 2, "{r}");
-    assert!(r["simulator"]["gym-aloha"].is_string(), "{r}");
+    assert!(r["audit"]["simulator"]["gym-aloha"].is_string(), "{r}");
+    assert_eq!(
+        r["test"]["outcomes"].as_array().map(Vec::len),
+        Some(2),
+        "{r}"
+    );
+    assert!(
+        r["audit"]["collection"]["seeds"]
+            .as_array()
+            .map_or(0, Vec::len)
+            >= 2,
+        "{r}"
+    );
     let c = read_json(&res.join("transfer-cube--controls.json"));
     assert_eq!(c["controls"]["scripted_expert"]["episodes"], 2, "{c}");
     assert_eq!(c["controls"]["untrained"]["episodes"], 1, "{c}");

@@ -53,13 +53,37 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
         assert_eq!(r["demonstrations"], 2, "{r}");
         assert_eq!(
             r["test_seeds"],
-            serde_json::json!([2_000_000, 2_000_001]),
+            serde_json::json!([3_000_000, 3_000_001]),
             "{r}"
         );
         assert_eq!(r["test"]["episodes"], 2, "{r}");
         assert_eq!(r["test"]["stages"].as_array().map(Vec::len), Some(3), "{r}");
-        assert!(r["simulator"]["mujoco"].is_string(), "{r}");
-        assert!(r["train_revision"].is_string(), "{r}");
+        // The audit: who trained and scored it, on what, from which demonstrations, and
+        // every episode's outcome.
+        let audit = &r["audit"];
+        assert!(audit["simulator"]["mujoco"].is_string(), "{r}");
+        assert!(audit["trained_by"]["revision"].is_string(), "{r}");
+        assert_eq!(
+            audit["scored_by"]["sha256"].as_str().map(str::len),
+            Some(64),
+            "{r}"
+        );
+        assert!(
+            audit["scored_by"]["command"]
+                .as_str()
+                .unwrap()
+                .starts_with("scaledp experiment compare --benchmark metaworld"),
+            "{r}"
+        );
+        assert!(
+            audit["collection"]["seeds"].as_array().map_or(0, Vec::len) >= 2,
+            "{r}"
+        );
+        assert_eq!(audit["train_seed"], 0, "{r}");
+        let outcomes = r["test"]["outcomes"].as_array().unwrap();
+        assert_eq!(outcomes.len(), 2, "{r}");
+        assert_eq!(outcomes[1]["seed"], 3_000_001, "{r}");
+        assert!(outcomes[0]["highest_stage"].is_string(), "{r}");
         let lo = r["wilson_low"].as_f64().unwrap();
         let hi = r["wilson_high"].as_f64().unwrap();
         assert!(
@@ -115,7 +139,7 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
         assert_eq!(r["earlier_scores"].as_array().map(Vec::len), Some(1), "{r}");
         let before = &r["earlier_scores"][0];
         assert_eq!(before["figures"]["episodes"], 2, "{r}");
-        assert!(before["simulator"]["mujoco"].is_string(), "{r}");
+        assert!(before["audit"]["simulator"]["mujoco"].is_string(), "{r}");
         assert!(
             r["test"]["bridge"].is_string(),
             "the bridge's behaviour: {r}"

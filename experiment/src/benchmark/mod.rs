@@ -12,6 +12,7 @@ mod replicates;
 mod report;
 mod rescore;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::AtomicBool;
@@ -27,8 +28,9 @@ pub(crate) use report::{is_benchmark, rebuild};
 pub use rescore::Earlier;
 
 use crate::arms::Arm;
+use crate::audit::{self, Audit, Binary, Collection};
 use crate::evaluate::{self, EvalPlan, Kind};
-use crate::results::{self, Controls, EvalFigures, Provenance};
+use crate::results::{self, Controls, EvalFigures};
 use crate::{train, Benchmark, CompareArgs, Settings};
 
 /// One (task, arm) result: `RESULTS/NAME/<task>--<arm>.json`.
@@ -77,12 +79,8 @@ pub struct TaskResult {
     pub train_command: String,
     /// The training settings.
     pub train_options: serde_json::Value,
-    /// The revision the run was trained at (recorded when training started).
-    pub train_revision: String,
-    /// The simulator's packages (`metaworld`, `mujoco`).
-    pub simulator: std::collections::BTreeMap<String, String>,
-    /// Where and what ran (the revision that scored it).
-    pub provenance: Provenance,
+    /// Who trained and scored it, on what, from which demonstrations.
+    pub audit: Audit,
     /// What the file said before each re-score (`compare --rescore`), the oldest first.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub earlier_scores: Vec<Earlier<EvalFigures>>,
@@ -102,8 +100,8 @@ pub struct TaskControls {
     pub arm: String,
     /// The controls.
     pub controls: Controls,
-    /// Where and what ran.
-    pub provenance: Provenance,
+    /// Who trained the arm's checkpoints and who scored the controls.
+    pub audit: Audit,
     /// What the file said before each re-score (`compare --rescore`), the oldest first.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub earlier_scores: Vec<Earlier<Controls>>,
@@ -231,17 +229,18 @@ fn same_pictures(rig: &Rig, ds: &Path, dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The revision a run was trained at: written beside it when its training starts.
-fn train_revision(run: &Path) -> Result<String> {
-    let path = run.join("REVISION");
-    if let Ok(r) = std::fs::read_to_string(&path) {
-        return Ok(r.trim().to_string());
-    }
-    std::fs::create_dir_all(run).with_context(|| format!("creating {}", run.display()))?;
-    let r = results::git_revision();
-    std::fs::write(&path, format!("{r}\n"))
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(r)
+/// The demonstrations of a task's run directory, with the command that collected them.
+fn collection(task_dir: &Path, rig: &Rig) -> Result<Collection> {
+    let demos = task_dir.join("demos");
+    let n = collected(&demos).0;
+    Collection::read(
+        &demos,
+        format!(
+            "scaledp collect --rig {} --successes {n} --seed 0 --out {}",
+            rig.name,
+            demos.display()
+        ),
+    )
 }
 
 /// Runs the benchmark comparison of `a`.
@@ -296,7 +295,7 @@ pub(crate) fn run(
             );
             let opts = arm.options(base.clone());
             let run = run_dir(&task_dir, arm.name, a.train_seed);
-            let revision = train_revision(&run)?;
+            let trainer = audit::record_trainer(&run)?;
             let trained = train::train(&dataset, &run, opts.clone(), stop)?;
             if trained.interrupted {
                 eprintln!(
@@ -342,9 +341,14 @@ pub(crate) fn run(
                 command: command(a, st, bench, task, arm),
                 train_command: crate::train_command(&dataset, &st.preset, arm, &opts, &run),
                 train_options: serde_json::to_value(&opts)?,
-                train_revision: revision,
-                simulator: test.simulator.clone().unwrap_or_default(),
-                provenance: Provenance::now(),
+                audit: Audit {
+                    schema: audit::SCHEMA,
+                    trained_by: Some(trainer),
+                    scored_by: Binary::this(),
+                    simulator: audit::simulator(&test),
+                    collection: Some(collection(&task_dir, &rig)?),
+                    train_seed: Some(a.train_seed),
+                },
                 earlier_scores: Vec::new(),
                 rescore_command: None,
             };
@@ -385,7 +389,7 @@ fn controls(
         return Ok(());
     }
     eprintln!("== {task}: controls");
-    let Some(scored) = score_controls(
+    let Some((scored, simulator)) = score_controls(
         rig,
         task_dir,
         arm.name,
@@ -401,7 +405,14 @@ fn controls(
         level: level.into(),
         arm: arm.name.into(),
         controls: scored,
-        provenance: Provenance::now(),
+        audit: Audit {
+            schema: audit::SCHEMA,
+            trained_by: Some(audit::record_trainer(&task_dir.join(arm.name))?),
+            scored_by: Binary::this(),
+            simulator,
+            collection: Some(collection(task_dir, rig)?),
+            train_seed: Some(0),
+        },
         earlier_scores: Vec::new(),
         rescore_command: None,
     };
@@ -411,7 +422,8 @@ fn controls(
 
 /// The controls of a task on the test seeds: the scripted expert (`expert` episodes), the
 /// untrained weights of `arm`'s run and its last checkpoint with its cameras frozen (`n`
-/// each); none until the run has its step-0 and a later checkpoint.
+/// each), and the simulator that scored them; none until the run has its step-0 and a later
+/// checkpoint.
 fn score_controls(
     rig: &Rig,
     task_dir: &Path,
@@ -419,7 +431,7 @@ fn score_controls(
     expert: u64,
     n: u64,
     plan: &EvalPlan,
-) -> Result<Option<Controls>> {
+) -> Result<Option<(Controls, BTreeMap<String, String>)>> {
     let ckpts = evaluate::checkpoints(&task_dir.join(arm))?;
     let (Some((0, untrained)), Some((_, last))) = (ckpts.first(), ckpts.last()) else {
         return Ok(None);
@@ -427,11 +439,15 @@ fn score_controls(
     let expert = evaluate::expert(task_dir, rig, Split::Test, expert, plan)?;
     let untrained = evaluate::checkpoint(untrained, Some(rig), Kind::Policy, Split::Test, n, plan)?;
     let frozen = evaluate::checkpoint(last, Some(rig), Kind::Frozen, Split::Test, n, plan)?;
-    Ok(Some(Controls {
-        untrained: Some(EvalFigures::of(&untrained)),
-        frozen_cameras: Some(EvalFigures::of(&frozen)),
-        scripted_expert: Some(EvalFigures::of(&expert)),
-    }))
+    let simulator = audit::simulator(&frozen);
+    Ok(Some((
+        Controls {
+            untrained: Some(EvalFigures::of(&untrained)),
+            frozen_cameras: Some(EvalFigures::of(&frozen)),
+            scripted_expert: Some(EvalFigures::of(&expert)),
+        },
+        simulator,
+    )))
 }
 
 /// The command line that reproduces one (task, arm).

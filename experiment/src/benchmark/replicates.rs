@@ -66,7 +66,7 @@ pub(super) fn pairings<'a>(
 mod tests {
     use super::super::{rebuild, result_path};
     use super::*;
-    use crate::results::{EvalFigures, Provenance};
+    use crate::results::EvalFigures;
 
     fn result(arm: &str, seed: u64, successes: u64) -> TaskResult {
         let test = EvalFigures::counts(successes, 50);
@@ -78,7 +78,7 @@ mod tests {
             train_seed: seed,
             what: arm.into(),
             test_success_rate: test.success_rate,
-            test_seeds: (2_000_000..2_000_050).collect(),
+            test_seeds: (3_000_000..3_000_050).collect(),
             wilson_low: 0.1,
             wilson_high: 0.9,
             test,
@@ -92,13 +92,7 @@ mod tests {
             command: "c".into(),
             train_command: "t".into(),
             train_options: serde_json::Value::Null,
-            train_revision: "abc".into(),
-            simulator: Default::default(),
-            provenance: Provenance {
-                git_revision: "abc".into(),
-                machine: "m".into(),
-                finished_utc: "now".into(),
-            },
+            audit: crate::audit::Audit::fixture(seed),
             earlier_scores: Vec::new(),
             rescore_command: None,
         }
@@ -182,5 +176,31 @@ mod tests {
             md.contains("--benchmark aloha --tasks <task> --rescore"),
             "{md}"
         );
+    }
+
+    /// The plot names each level under its bars and draws every bar's 95 % interval (the
+    /// MetaWorld plot had neither).
+    #[test]
+    fn the_plot_labels_each_level_and_draws_intervals() {
+        let dir = tempfile::tempdir().unwrap();
+        for (task, level, arm, k) in [
+            ("reach", "easy", "ti", 40),
+            ("reach", "easy", "dp-t", 30),
+            ("assembly", "hard", "ti", 10),
+            ("assembly", "hard", "dp-t", 20),
+        ] {
+            let mut r = result(arm, 0, k);
+            r.benchmark = "metaworld".into();
+            (r.task, r.level) = (task.into(), level.into());
+            let path = result_path(dir.path(), task, arm, 0);
+            std::fs::write(path, serde_json::to_vec(&r).unwrap()).unwrap();
+        }
+        rebuild(dir.path()).unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("success_by_level.svg")).unwrap();
+        assert!(svg.contains("\neasy (1 task)\n"), "{svg}");
+        assert!(svg.contains("\nhard (1 task)\n"), "{svg}");
+        // Four bars, four whiskers (the 2-px polylines; the axes are 1 px).
+        let whiskers = svg.matches(r#"stroke-width="2" points"#).count();
+        assert_eq!(whiskers, 4, "{svg}");
     }
 }

@@ -147,7 +147,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     tasks.dedup();
     let mut md = String::from(
         "# Results\n\nRebuilt by `scaledp experiment report` from the files beside it: test-seed \
-         success of each arm's last checkpoint (seeds 2 000 000 …, 95 % Wilson interval), and the \
+         success of each arm's last checkpoint (seeds 3 000 000 …, 95 % Wilson interval), and the \
          controls.\n\n",
     );
     md.push_str("| level | task |");
@@ -223,9 +223,12 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
                     r.step_s,
                     ms(r.test.inference_ms_p50),
                     ms(r.test.inference_ms_p99),
-                    short(&r.train_revision),
-                    short(&r.provenance.git_revision),
-                    r.provenance.machine
+                    r.audit
+                        .trained_by
+                        .as_ref()
+                        .map_or("–".into(), |b| short(&b.revision)),
+                    short(&r.audit.scored_by.revision),
+                    r.audit.scored_by.machine
                 ));
             }
         }
@@ -233,7 +236,8 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     if let Some(r) = l.results.first() {
         md.push_str(&format!(
             "\nSimulator: {}. Every (task, arm) reproduces with the `command` of its JSON file.\n",
-            r.simulator
+            r.audit
+                .simulator
                 .iter()
                 .map(|(k, v)| format!("{k} {v}"))
                 .collect::<Vec<_>>()
@@ -321,6 +325,27 @@ type Means = Vec<(Level, (usize, Vec<f64>))>;
 /// Per level: the tasks where every arm has a result, and each arm's mean over them (a task's
 /// training seeds averaged first).
 fn level_means(tasks: &[(Level, String)], arms: &[&str], results: &[TaskResult]) -> Means {
+    level_figures(tasks, arms, results)
+        .into_iter()
+        .map(|(l, n, v)| (l, (n, v.into_iter().map(|f| f.mean).collect())))
+        .collect()
+}
+
+/// One arm's figure on a level: the mean of its tasks' rates, and the episodes pooled over
+/// its tasks and training seeds (for the interval).
+#[derive(Debug, Clone, Copy)]
+struct LevelFigure {
+    mean: f64,
+    successes: u64,
+    episodes: u64,
+}
+
+/// [`level_means`] with each arm's pooled episodes.
+fn level_figures(
+    tasks: &[(Level, String)],
+    arms: &[&str],
+    results: &[TaskResult],
+) -> Vec<(Level, usize, Vec<LevelFigure>)> {
     let replicate_mean = |t: &str, a: &str| {
         let rs = replicates(results, t, a);
         rs.iter().map(|r| r.test_success_rate).sum::<f64>() / rs.len().max(1) as f64
@@ -339,11 +364,22 @@ fn level_means(tasks: &[(Level, String)], arms: &[&str], results: &[TaskResult])
         if full.is_empty() {
             continue;
         }
-        let means = arms
+        let figures = arms
             .iter()
-            .map(|a| full.iter().map(|t| replicate_mean(t, a)).sum::<f64>() / full.len() as f64)
+            .map(|a| {
+                let pooled = full.iter().flat_map(|t| replicates(results, t, a));
+                let (successes, episodes) = pooled.fold((0, 0), |(k, n), r| {
+                    (k + r.test.successes, n + r.test.episodes)
+                });
+                LevelFigure {
+                    mean: full.iter().map(|t| replicate_mean(t, a)).sum::<f64>()
+                        / full.len() as f64,
+                    successes,
+                    episodes,
+                }
+            })
             .collect();
-        out.push((level.clone(), (full.len(), means)));
+        out.push((level.clone(), full.len(), figures));
     }
     out
 }
@@ -368,7 +404,8 @@ const COLOURS: [RGBColor; 7] = [
 ];
 
 /// Grouped bars: per level (or per task, when every task has the same level), each arm's mean
-/// test success.
+/// test success, with the 95 % Wilson interval of its pooled episodes as a whisker, and each
+/// group's name under it.
 fn plot(
     benchmark: &str,
     tasks: &[(Level, String)],
@@ -377,19 +414,19 @@ fn plot(
     path: &Path,
 ) -> Result<()> {
     let by_task = tasks.iter().all(|(l, _)| *l == tasks[0].0);
-    let means: Means = if by_task {
+    let groups = if by_task {
         let per_task: Vec<(Level, String)> = tasks
             .iter()
             .map(|(_, t)| (level_of(t), t.clone()))
             .collect();
-        level_means(&per_task, arms, results)
+        level_figures(&per_task, arms, results)
     } else {
-        level_means(tasks, arms, results)
+        level_figures(tasks, arms, results)
     };
     let err = |e: String| anyhow!("plot: {e}");
-    let root = SVGBackend::new(path, (800, 460)).into_drawing_area();
+    let root = SVGBackend::new(path, (800, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-    let groups = means.len().max(1) as f64;
+    let n = groups.len().max(1) as f64;
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
@@ -400,43 +437,26 @@ fn plot(
             ("sans-serif", 20),
         )
         .margin(16)
-        .x_label_area_size(40)
+        .x_label_area_size(48)
         .y_label_area_size(56)
-        .build_cartesian_2d(0f64..groups, 0f64..1.0)
+        .build_cartesian_2d(0f64..n, 0f64..1.0)
         .map_err(|e| err(e.to_string()))?;
-    let labels: Vec<String> = means
-        .iter()
-        .map(|(l, (n, _))| {
-            if by_task {
-                l.label.clone()
-            } else {
-                format!("{} ({n} tasks)", l.label)
-            }
-        })
-        .collect();
     chart
         .configure_mesh()
         .disable_x_mesh()
-        .x_labels(means.len().max(1))
-        .x_label_formatter(&|x| {
-            labels
-                .get(x.floor() as usize)
-                .filter(|_| (x.fract() - 0.5).abs() < 1e-6)
-                .cloned()
-                .unwrap_or_default()
-        })
-        .y_desc("mean test success rate")
+        .x_labels(0)
+        .y_desc("mean test success (whisker: 95 % Wilson, pooled)")
         .draw()
         .map_err(|e| err(e.to_string()))?;
     let width = 0.8 / arms.len().max(1) as f64;
     for (k, arm) in arms.iter().enumerate() {
         let c = COLOURS[k % COLOURS.len()];
-        let bars: Vec<Rectangle<(f64, f64)>> = means
+        let bars: Vec<Rectangle<(f64, f64)>> = groups
             .iter()
             .enumerate()
-            .map(|(g, (_, (_, v)))| {
+            .map(|(g, (_, _, v))| {
                 let x0 = g as f64 + 0.1 + k as f64 * width;
-                Rectangle::new([(x0, 0.0), (x0 + width * 0.9, v[k])], c.filled())
+                Rectangle::new([(x0, 0.0), (x0 + width * 0.9, v[k].mean)], c.filled())
             })
             .collect();
         chart
@@ -444,6 +464,34 @@ fn plot(
             .map_err(|e| err(e.to_string()))?
             .label(arm.to_string())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
+        let whiskers = groups.iter().enumerate().map(|(g, (_, _, v))| {
+            let x = g as f64 + 0.1 + k as f64 * width + width * 0.45;
+            let (lo, hi) = scaledp_deploy::wilson_interval(v[k].successes, v[k].episodes);
+            PathElement::new(vec![(x, lo), (x, hi)], BLACK.stroke_width(2))
+        });
+        chart
+            .draw_series(whiskers)
+            .map_err(|e| err(e.to_string()))?;
+    }
+    // Each group's name under its bars, in pixels below the axis (plotters' tick labels sit
+    // on its own tick positions, which need not be the groups' centres).
+    let font =
+        ("sans-serif", 15)
+            .into_font()
+            .color(&BLACK)
+            .pos(plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Center,
+                plotters::style::text_anchor::VPos::Top,
+            ));
+    for (g, (l, n, _)) in groups.iter().enumerate() {
+        let text = if by_task {
+            l.label.clone()
+        } else {
+            format!("{} ({n} task{})", l.label, if *n == 1 { "" } else { "s" })
+        };
+        let (x, y) = chart.backend_coord(&(g as f64 + 0.5, 0.0));
+        root.draw(&Text::new(text, (x, y + 8), font.clone()))
+            .map_err(|e| err(e.to_string()))?;
     }
     chart
         .configure_series_labels()

@@ -5,7 +5,6 @@
 //! (a `.partial` renamed over it). A (task, arm) whose checkpoint is gone is named at the end
 //! and the others are still scored.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -15,8 +14,9 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::{rebuild, result_path, run_dir, score_controls, TaskControls, TaskResult};
+use crate::audit::{self, Audit, Binary};
 use crate::evaluate::{self, EvalPlan, Kind};
-use crate::results::{self, Controls, EvalFigures, Provenance};
+use crate::results::{self, Controls, EvalFigures};
 use crate::{Benchmark, CompareArgs, Settings};
 
 /// What a result file said before a re-score.
@@ -24,11 +24,8 @@ use crate::{Benchmark, CompareArgs, Settings};
 pub struct Earlier<T> {
     /// The figures then.
     pub figures: T,
-    /// The simulator's versions then (a task result's; its bridge's behaviour among them).
-    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub simulator: BTreeMap<String, String>,
-    /// The build that scored them.
-    pub provenance: Provenance,
+    /// Who scored them, with what simulator.
+    pub audit: Audit,
 }
 
 /// Scores the finished results of `a`'s tasks and arms again.
@@ -145,16 +142,15 @@ fn task_result(
     let was = r.test.cell();
     r.earlier_scores.push(Earlier {
         figures: r.test.clone(),
-        simulator: std::mem::take(&mut r.simulator),
-        provenance: r.provenance.clone(),
+        audit: r.audit.clone(),
     });
     r.test_success_rate = test.success_rate;
     r.wilson_low = test.wilson_low;
     r.wilson_high = test.wilson_high;
     r.test_seeds = (0..test.episodes).map(|i| test.first_seed + i).collect();
-    r.simulator = report.simulator.clone().unwrap_or_default();
+    r.audit.simulator = audit::simulator(&report);
+    r.audit.scored_by = Binary::this();
     r.test = test;
-    r.provenance = Provenance::now();
     r.rescore_command = Some(command);
     results::write_json(path, &r)?;
     Ok(format!(
@@ -179,20 +175,22 @@ fn controls(
         episodes(&before.scripted_expert),
         episodes(&before.untrained).max(episodes(&before.frozen_cameras)),
     );
-    let scored = score_controls(rig, task_dir, &c.arm, expert, n, plan)?.with_context(|| {
-        format!(
-            "{}: the checkpoints of {} are gone",
-            path.display(),
-            task_dir.join(&c.arm).display()
-        )
-    })?;
+    let (scored, simulator) = score_controls(rig, task_dir, &c.arm, expert, n, plan)?
+        .with_context(|| {
+            format!(
+                "{}: the checkpoints of {} are gone",
+                path.display(),
+                task_dir.join(&c.arm).display()
+            )
+        })?;
     let line = summary(&c.controls, &scored);
     let was = std::mem::replace(&mut c.controls, scored);
     c.earlier_scores.push(Earlier {
         figures: was,
-        simulator: BTreeMap::new(),
-        provenance: std::mem::replace(&mut c.provenance, Provenance::now()),
+        audit: c.audit.clone(),
     });
+    c.audit.simulator = simulator;
+    c.audit.scored_by = Binary::this();
     c.rescore_command = Some(command);
     results::write_json(path, &c)?;
     Ok(format!("{line}; {}", path.display()))

@@ -189,6 +189,9 @@ impl Denoiser {
                 PosEmbed::SinCos => {
                     vb.get_fixed(&[1, p.action_chunk, d], "pos_embed", Init::SinCos)?
                 }
+                PosEmbed::LearnedSinCos => {
+                    vb.get(&[1, p.action_chunk, d], "pos_embed", Init::SinCos, false)?
+                }
             },
             t_mlp0: Linear::new(&t.pp(0), FREQ_DIM, d, n02)?,
             t_mlp2: Linear::new(&t.pp(2), d, d, n02)?,

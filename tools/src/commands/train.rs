@@ -106,7 +106,8 @@ pub struct TrainArgs {
     #[arg(long)]
     pub attention: Option<String>,
     /// ScaleDP's positional embedding of the action tokens: learned (the paper's, from
-    /// N(0, 0.02)) or sin-cos (DiT's fixed table, not trained) [learned].
+    /// N(0, 0.02)), sin-cos (DiT's fixed table, not trained) or learned-sin-cos (trained,
+    /// starting from DiT's table) [learned].
     #[arg(long)]
     pub pos_embed: Option<String>,
     /// Leave action steps past an episode's end out of the loss (by default they are trained
