@@ -172,6 +172,8 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
                         false => enc,
                     },
                     compressed: t.message_type.ends_with("CompressedImage"),
+                    depth: None,
+                    camera_info_topic: None,
                     vertical_fov_deg: None,
                 });
             }
@@ -284,6 +286,8 @@ pub fn detect(path: &Path, rec: &Recording, control_rate_hz: f64) -> Result<Rig>
         arms,
         cameras,
         simulator: None,
+        tf: None,
+        extra_topics: Vec::new(),
     };
     Rig::parse(&toml::to_string(&rig).unwrap_or_default(), path)
         .map_err(|e| Error::input(path, format!("detected rig is inconsistent: {e}")))

@@ -110,14 +110,14 @@ impl EpisodeOptions {
             .map_err(Error::mcap(&partial))?;
         let mut channel_ids = Vec::with_capacity(topics.len());
         for t in topics {
-            let definition = scaledp_schema::msg::definition(t.message_type).ok_or_else(|| {
+            let definition = scaledp_schema::msg::definition(&t.message_type).ok_or_else(|| {
                 Error::UnknownType {
                     topic: t.topic.clone(),
-                    message_type: t.message_type.into(),
+                    message_type: t.message_type.clone(),
                 }
             })?;
             let schema = writer
-                .add_schema(t.message_type, "ros2msg", definition.as_bytes())
+                .add_schema(&t.message_type, "ros2msg", definition.as_bytes())
                 .map_err(Error::mcap(&partial))?;
             let meta = BTreeMap::from([(
                 "offered_qos_profiles".to_string(),

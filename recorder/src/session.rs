@@ -121,7 +121,7 @@ impl RecorderOptions {
         for (i, t) in topics.iter().enumerate() {
             for key in [
                 bridge_key(&self.bridge_namespace, &t.topic),
-                rmw_key_expr(&t.topic, t.message_type),
+                rmw_key_expr(&t.topic, &t.message_type),
             ] {
                 let control = control.clone();
                 let sub = session

@@ -11,12 +11,12 @@ use scaledp_schema::rig::TopicSpec;
 fn every_complete_chunk_survives_any_cut() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("episode_000000.mcap");
-    let topics = [TopicSpec {
-        topic: "/franka/joint_states".into(),
-        message_type: "sensor_msgs/msg/JointState",
-        rate_hz: 1000.0,
-        is_image: false,
-    }];
+    let topics: Vec<TopicSpec> = scaledp_schema::Rig::builtin("franka_2zed")
+        .unwrap()
+        .topics()
+        .into_iter()
+        .filter(|t| t.topic == "/franka/joint_states")
+        .collect();
     let meta = BTreeMap::from([("task".to_string(), "t".to_string())]);
     let mut w = EpisodeOptions::new()
         .chunk_size(1 << 30)

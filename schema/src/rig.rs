@@ -7,9 +7,14 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+mod camera;
+mod topics;
+
 pub use crate::benchmarks::{Simulator, SimulatorKind};
 use crate::error::{Error, Result};
 use crate::kinematics::RobotModel;
+pub use camera::{Camera, CameraModel, Depth, DepthEncoding, VIDEO_CODECS};
+pub use topics::{ExtraTopic, TfTopics, TopicKind, TopicSpec, CAMERA_INFO, TF_MESSAGE};
 
 /// A whole rig: arms, cameras, and the rate a policy runs at.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -29,6 +34,12 @@ pub struct Rig {
     /// `collect` and `eval` run behind the bridge protocol instead of the built-in cell.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulator: Option<Simulator>,
+    /// `/tf` and `/tf_static`, recorded when the table is present (`[tf]`: both by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tf: Option<TfTopics>,
+    /// Further topics to record verbatim, whatever their type (`[[topic]]`).
+    #[serde(rename = "topic", default, skip_serializing_if = "Vec::is_empty")]
+    pub extra_topics: Vec<ExtraTopic>,
 }
 
 /// One arm and its gripper.
@@ -183,100 +194,6 @@ pub struct Gripper {
     pub command_topic: Option<String>,
 }
 
-/// Camera hardware, which fixes the raw encoding its ROS 2 wrapper publishes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum CameraModel {
-    /// Stereolabs ZED (zed-ros2-wrapper): `bgra8`.
-    Zed,
-    /// Intel RealSense (realsense-ros): `rgb8`.
-    Realsense,
-    /// A simulator's camera (the simulation benchmarks' bridges): `rgb8`.
-    Sim,
-}
-
-impl CameraModel {
-    /// The encoding the vendor's ROS 2 wrapper publishes on its color topic.
-    pub fn default_encoding(self) -> &'static str {
-        match self {
-            Self::Zed => "bgra8",
-            Self::Realsense | Self::Sim => "rgb8",
-        }
-    }
-}
-
-/// One camera.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Camera {
-    /// Name used in feature names, e.g. `wrist`.
-    pub name: String,
-    /// Color image topic.
-    pub topic: String,
-    /// Hardware model.
-    pub model: CameraModel,
-    /// Columns.
-    pub width: u32,
-    /// Rows.
-    pub height: u32,
-    /// Frame rate (Hz).
-    pub fps: f64,
-    /// Pixel encoding of raw images (`bgra8`, `rgb8`, …; the model's default when absent), or
-    /// the codec of a compressed video stream (`h264`, `h265`, `av1`): the topic then carries
-    /// `foxglove_msgs/msg/CompressedVideo`.
-    pub encoding: Option<String>,
-    /// True when the topic carries `sensor_msgs/CompressedImage`.
-    #[serde(default)]
-    pub compressed: bool,
-    /// A simulated camera's vertical field of view (degrees), replacing the simulator's own: on
-    /// a MuJoCo bridge (MetaWorld, ALOHA) a zoom that spends a small image's pixels on the
-    /// workspace; the built-in cell places its fixed cameras to frame the workspace whatever
-    /// their field, so there it zooms the wrist cameras. Real cameras ignore it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub vertical_fov_deg: Option<f64>,
-}
-
-impl Camera {
-    /// The encoding of this camera's raw images.
-    pub fn encoding(&self) -> &str {
-        self.encoding
-            .as_deref()
-            .unwrap_or(self.model.default_encoding())
-    }
-    /// The video codec when the topic carries `foxglove_msgs/msg/CompressedVideo`.
-    pub fn video_codec(&self) -> Option<&str> {
-        self.encoding
-            .as_deref()
-            .filter(|e| VIDEO_CODECS.contains(e))
-    }
-    /// The ROS 2 message type on the topic.
-    pub fn message_type(&self) -> &'static str {
-        if self.compressed {
-            "sensor_msgs/msg/CompressedImage"
-        } else if self.video_codec().is_some() {
-            "foxglove_msgs/msg/CompressedVideo"
-        } else {
-            "sensor_msgs/msg/Image"
-        }
-    }
-}
-
-/// Codecs of `foxglove_msgs/msg/CompressedVideo` camera topics (a camera's `encoding`).
-pub const VIDEO_CODECS: &[&str] = &["h264", "h265", "av1"];
-
-/// One topic a rig publishes, with its type and nominal rate.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TopicSpec {
-    /// ROS 2 topic name with its leading `/`.
-    pub topic: String,
-    /// Full ROS 2 type, e.g. `sensor_msgs/msg/JointState`.
-    pub message_type: &'static str,
-    /// Nominal publish rate (Hz).
-    pub rate_hz: f64,
-    /// True for image topics (large messages).
-    pub is_image: bool,
-}
-
 const BUILTIN: &[(&str, &str)] = &[
     ("franka_2zed", include_str!("../../rigs/franka_2zed.toml")),
     (
@@ -344,66 +261,6 @@ impl Rig {
             }
         }
         Self::load(path)
-    }
-
-    /// Every topic of the rig, in this order: cameras, then each arm's joint states and gripper
-    /// states, then each arm's command topics (arm, then gripper), all as declared. Command
-    /// topics carry the rig's control rate as their nominal rate (a policy commands at that
-    /// rate; a leader device may publish faster).
-    pub fn topics(&self) -> Vec<TopicSpec> {
-        let mut out: Vec<TopicSpec> = self
-            .cameras
-            .iter()
-            .map(|c| TopicSpec {
-                topic: c.topic.clone(),
-                message_type: c.message_type(),
-                rate_hz: c.fps,
-                is_image: true,
-            })
-            .collect();
-        for arm in &self.arms {
-            out.push(TopicSpec {
-                topic: arm.joint_state_topic.clone(),
-                message_type: "sensor_msgs/msg/JointState",
-                rate_hz: arm.rate_hz,
-                is_image: false,
-            });
-            if let Some(g) = &arm.gripper {
-                out.push(TopicSpec {
-                    topic: g.topic.clone(),
-                    message_type: "sensor_msgs/msg/JointState",
-                    rate_hz: g.rate_hz,
-                    is_image: false,
-                });
-            }
-        }
-        out.extend(self.command_topics());
-        out
-    }
-
-    /// The command topics alone (the tail of [`Self::topics`]): per arm, its `command_topic`
-    /// and its gripper's `command_topic`.
-    pub fn command_topics(&self) -> Vec<TopicSpec> {
-        let mut out = Vec::new();
-        for arm in &self.arms {
-            if let Some(topic) = &arm.command_topic {
-                out.push(TopicSpec {
-                    topic: topic.clone(),
-                    message_type: arm.command_type.unwrap_or_default().message_type(),
-                    rate_hz: self.control_rate_hz,
-                    is_image: false,
-                });
-            }
-            if let Some(topic) = arm.gripper.as_ref().and_then(|g| g.command_topic.as_ref()) {
-                out.push(TopicSpec {
-                    topic: topic.clone(),
-                    message_type: "sensor_msgs/msg/JointState",
-                    rate_hz: self.control_rate_hz,
-                    is_image: false,
-                });
-            }
-        }
-        out
     }
 
     fn validate(&self) -> std::result::Result<(), String> {
@@ -474,6 +331,26 @@ impl Rig {
             if name.is_empty() || names[..i].iter().any(|(k, n)| k == kind && n == name) {
                 return Err(format!("{kind} name '{name}' is empty or used twice"));
             }
+        }
+        for t in &self.extra_topics {
+            let parts: Vec<&str> = t.message_type.split('/').collect();
+            if parts.len() != 3 || parts[1] != "msg" || parts.iter().any(|p| p.is_empty()) {
+                return Err(format!(
+                    "topic '{}': type '{}' is not a full ROS 2 type like pkg/msg/Name",
+                    t.name, t.message_type
+                ));
+            }
+            if t.rate_hz.is_some_and(|r| !positive(r)) {
+                return Err(format!("topic '{}': rate_hz must be > 0", t.name));
+            }
+        }
+        if self
+            .tf
+            .as_ref()
+            .and_then(|t| t.rate_hz)
+            .is_some_and(|r| !positive(r))
+        {
+            return Err("[tf] rate_hz must be > 0".into());
         }
         let topics = self.topics();
         for (i, t) in topics.iter().enumerate() {

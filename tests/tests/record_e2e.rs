@@ -202,7 +202,7 @@ fn recorded_episode_is_what_the_sim_published_and_ros2_tools_read_it() {
         assert_eq!(c["schema_name"], spec.message_type);
         assert_eq!(
             c["schema_data"].as_str().unwrap(),
-            scaledp_schema::msg::definition(spec.message_type).unwrap()
+            scaledp_schema::msg::definition(&spec.message_type).unwrap()
         );
         assert!(c["metadata"]["offered_qos_profiles"]
             .as_str()

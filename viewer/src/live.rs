@@ -192,7 +192,7 @@ impl RecordView {
                             let t = &specs[topic];
                             collector.message(
                                 &t.topic,
-                                t.message_type,
+                                &t.message_type,
                                 log_ns,
                                 Serialization::Cdr,
                                 &payload,

@@ -89,7 +89,7 @@ fn command_topics_come_last_with_their_types() {
         let topics = sim.topics();
         assert_eq!(topics.len(), n + 2 * sim.arms.len());
         for (a, b) in real.topics().iter().zip(&topics) {
-            assert_eq!((&a.topic, a.message_type), (&b.topic, b.message_type));
+            assert_eq!((&a.topic, &a.message_type), (&b.topic, &b.message_type));
         }
         assert_eq!(&topics[n..], sim.command_topics().as_slice());
         for pair in topics[n..].chunks(2) {
@@ -137,4 +137,84 @@ fn gripper_width_round_trips() {
     // ALOHA: fingers at gym-aloha's open position (0.058 m each) are 0.116 m apart.
     let aloha = GripperModel::AlohaViperx;
     assert!((aloha.width_m(&[0.058, -0.058]) - aloha.max_width_m()).abs() < 1e-12);
+}
+
+/// A camera's depth and `camera_info`, `/tf`, `/tf_static` and further topics are topics of
+/// the rig, after the training streams (whose indices stay as they were), each with its kind,
+/// owner and whether it is latched.
+#[test]
+fn what_is_recorded_beside_the_training_streams() {
+    let base = include_str!("../../../rigs/bimanual_ur5_3rs.toml");
+    let n = Rig::parse(base, Path::new("base.toml"))
+        .unwrap()
+        .topics()
+        .len();
+    let text = base.replacen(
+        "fps = 30.0",
+        "fps = 30.0\ncamera_info_topic = \"/cam_high/camera/color/camera_info\"\n\
+         depth = { topic = \"/cam_high/camera/aligned_depth_to_color/image_raw\", encoding = \"16UC1\" }",
+        1,
+    ) + "\n[tf]\nrate_hz = 100.0\n\n[[topic]]\nname = \"/diagnostics\"\ntype = \"diagnostic_msgs/msg/DiagnosticArray\"\n";
+    let rig = Rig::parse(&text, Path::new("rs.toml")).unwrap();
+    let topics = rig.topics();
+    let beside: Vec<(&str, TopicKind, &str, bool, f64)> = topics[n..]
+        .iter()
+        .map(|t| {
+            (
+                t.topic.as_str(),
+                t.kind,
+                t.owner.as_str(),
+                t.latched,
+                t.rate_hz,
+            )
+        })
+        .collect();
+    assert_eq!(
+        beside,
+        [
+            (
+                "/cam_high/camera/aligned_depth_to_color/image_raw",
+                TopicKind::Depth,
+                "high",
+                false,
+                30.0
+            ),
+            (
+                "/cam_high/camera/color/camera_info",
+                TopicKind::CameraInfo,
+                "high",
+                false,
+                30.0
+            ),
+            ("/tf", TopicKind::Tf, "", false, 100.0),
+            ("/tf_static", TopicKind::TfStatic, "", true, 0.0),
+            ("/diagnostics", TopicKind::Extra, "", false, 0.0),
+        ]
+    );
+    assert_eq!(topics[n].message_type, "sensor_msgs/msg/Image");
+    assert!(topics[n].is_image);
+    assert_eq!(
+        rig.cameras[0].depth.as_ref().map(|d| d.encoding),
+        Some(DepthEncoding::U16Millimetres)
+    );
+    // What a bad one is told.
+    for (edit, want) in [
+        (
+            text.replace("encoding = \"16UC1\"", "encoding = \"mono8\""),
+            "unknown variant `mono8`",
+        ),
+        (
+            text.replace("diagnostic_msgs/msg/DiagnosticArray", "DiagnosticArray"),
+            "is not a full ROS 2 type",
+        ),
+        (
+            text.replace("name = \"/diagnostics\"", "name = \"/tf\""),
+            "'/tf' is used twice",
+        ),
+    ] {
+        let e = Rig::parse(&edit, Path::new("bad.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(want) && e.contains("bad.toml"), "{e}");
+    }
 }

@@ -49,7 +49,7 @@ pub mod live {
         for (i, t) in view.topics().iter().enumerate() {
             for key in [
                 bridge_key(namespace, &t.topic),
-                rmw_key_expr(&t.topic, t.message_type),
+                rmw_key_expr(&t.topic, &t.message_type),
             ] {
                 let v = view.clone();
                 let sub = recorder

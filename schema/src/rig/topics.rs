@@ -1,0 +1,231 @@
+//! Every topic a rig publishes, as the recorder subscribes to them and the converter and the
+//! session verdict read them: colour images and joints (what a policy trains on), the command
+//! topics, and what a serious recording keeps beside them (registered depth, `camera_info`,
+//! `/tf`, `/tf_static` and any further topics the rig lists).
+
+use serde::{Deserialize, Serialize};
+
+use super::Rig;
+
+/// One topic a rig publishes, with its type and nominal rate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicSpec {
+    /// ROS 2 topic name with its leading `/`.
+    pub topic: String,
+    /// Full ROS 2 type, e.g. `sensor_msgs/msg/JointState`.
+    pub message_type: String,
+    /// Nominal publish rate (Hz); 0 where the rig expects none (latched topics, further topics
+    /// listed without a rate), so no rate is checked.
+    pub rate_hz: f64,
+    /// True for image topics (large messages).
+    pub is_image: bool,
+    /// What the topic is to the rig.
+    pub kind: TopicKind,
+    /// The camera or arm it belongs to (empty for rig-wide topics).
+    pub owner: String,
+    /// Transient-local ("latched"): published once and re-delivered to late joiners, so a
+    /// recorder must query the publishers' cache, and every episode must hold it.
+    pub latched: bool,
+}
+
+impl TopicSpec {
+    fn new(topic: &str, message_type: &str, rate_hz: f64, kind: TopicKind, owner: &str) -> Self {
+        TopicSpec {
+            topic: topic.to_string(),
+            message_type: message_type.to_string(),
+            rate_hz,
+            is_image: matches!(kind, TopicKind::Color | TopicKind::Depth),
+            kind,
+            owner: owner.to_string(),
+            latched: kind == TopicKind::TfStatic,
+        }
+    }
+}
+
+/// What a topic is to the rig.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TopicKind {
+    /// A camera's colour images.
+    Color,
+    /// An arm's joint states.
+    Joints,
+    /// A gripper's joint states.
+    Gripper,
+    /// An arm's or gripper's command topic.
+    Command,
+    /// A camera's registered depth.
+    Depth,
+    /// A camera's (or its depth image's) `sensor_msgs/msg/CameraInfo`.
+    CameraInfo,
+    /// `/tf`.
+    Tf,
+    /// `/tf_static` (latched).
+    TfStatic,
+    /// A further topic the rig lists or `record --topic` adds, recorded verbatim.
+    Extra,
+}
+
+/// A further topic to record verbatim, whatever its type (`[[topic]]` in a rig file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtraTopic {
+    /// The ROS 2 topic, e.g. `/diagnostics`.
+    pub name: String,
+    /// Its full ROS 2 type, e.g. `diagnostic_msgs/msg/DiagnosticArray`.
+    #[serde(rename = "type")]
+    pub message_type: String,
+    /// Its nominal rate (Hz), checked by the episode's verdict when given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_hz: Option<f64>,
+    /// Transient-local: published once (a robot description, a map), kept in every episode.
+    #[serde(default)]
+    pub latched: bool,
+}
+
+/// `/tf` and `/tf_static` as tf2 publishes them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TfTopics {
+    /// Record `/tf` (default true).
+    #[serde(default = "yes")]
+    pub dynamic: bool,
+    /// Record `/tf_static`, latched (default true).
+    #[serde(default = "yes", rename = "static")]
+    pub static_: bool,
+    /// The nominal rate of `/tf` (Hz), checked by the verdict when given (robot_state_publisher
+    /// publishes at the joint states' rate, a driver at its own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_hz: Option<f64>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// `tf2_msgs/msg/TFMessage`.
+pub const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
+/// `sensor_msgs/msg/CameraInfo`.
+pub const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
+const JOINT_STATE: &str = "sensor_msgs/msg/JointState";
+
+impl Rig {
+    /// Every topic of the rig, in this order: cameras, then each arm's joint states and gripper
+    /// states, then each arm's command topics (arm, then gripper), all as declared; then what
+    /// is recorded beside them: per camera its depth and `camera_info` topics, `/tf` and
+    /// `/tf_static`, and the rig's further topics. Command topics carry the rig's control rate
+    /// as their nominal rate (a policy commands at that rate; a leader device may publish
+    /// faster). The first part's order is what training data is indexed by, so additions go
+    /// after it.
+    pub fn topics(&self) -> Vec<TopicSpec> {
+        let mut out: Vec<TopicSpec> = self
+            .cameras
+            .iter()
+            .map(|c| TopicSpec::new(&c.topic, c.message_type(), c.fps, TopicKind::Color, &c.name))
+            .collect();
+        for arm in &self.arms {
+            out.push(TopicSpec::new(
+                &arm.joint_state_topic,
+                JOINT_STATE,
+                arm.rate_hz,
+                TopicKind::Joints,
+                &arm.name,
+            ));
+            if let Some(g) = &arm.gripper {
+                out.push(TopicSpec::new(
+                    &g.topic,
+                    JOINT_STATE,
+                    g.rate_hz,
+                    TopicKind::Gripper,
+                    &arm.name,
+                ));
+            }
+        }
+        out.extend(self.command_topics());
+        out.extend(self.recorded_beside());
+        out
+    }
+
+    /// The command topics alone: per arm, its `command_topic` and its gripper's
+    /// `command_topic`.
+    pub fn command_topics(&self) -> Vec<TopicSpec> {
+        let mut out = Vec::new();
+        for arm in &self.arms {
+            if let Some(topic) = &arm.command_topic {
+                out.push(TopicSpec::new(
+                    topic,
+                    arm.command_type.unwrap_or_default().message_type(),
+                    self.control_rate_hz,
+                    TopicKind::Command,
+                    &arm.name,
+                ));
+            }
+            if let Some(topic) = arm.gripper.as_ref().and_then(|g| g.command_topic.as_ref()) {
+                out.push(TopicSpec::new(
+                    topic,
+                    JOINT_STATE,
+                    self.control_rate_hz,
+                    TopicKind::Command,
+                    &arm.name,
+                ));
+            }
+        }
+        out
+    }
+
+    /// What is recorded beside the training streams (the tail of [`Self::topics`]): per camera
+    /// its depth and `camera_info` topics, then `/tf`, `/tf_static` and the further topics.
+    pub fn recorded_beside(&self) -> Vec<TopicSpec> {
+        let mut out = Vec::new();
+        for c in &self.cameras {
+            if let Some(d) = &c.depth {
+                out.push(TopicSpec::new(
+                    &d.topic,
+                    d.message_type(),
+                    c.fps,
+                    TopicKind::Depth,
+                    &c.name,
+                ));
+            }
+            let infos = [
+                c.camera_info_topic.as_ref(),
+                c.depth.as_ref().and_then(|d| d.camera_info_topic.as_ref()),
+            ];
+            for topic in infos.into_iter().flatten() {
+                out.push(TopicSpec::new(
+                    topic,
+                    CAMERA_INFO,
+                    c.fps,
+                    TopicKind::CameraInfo,
+                    &c.name,
+                ));
+            }
+        }
+        if let Some(tf) = &self.tf {
+            if tf.dynamic {
+                let rate = tf.rate_hz.unwrap_or(0.0);
+                out.push(TopicSpec::new("/tf", TF_MESSAGE, rate, TopicKind::Tf, ""));
+            }
+            if tf.static_ {
+                out.push(TopicSpec::new(
+                    "/tf_static",
+                    TF_MESSAGE,
+                    0.0,
+                    TopicKind::TfStatic,
+                    "",
+                ));
+            }
+        }
+        for t in &self.extra_topics {
+            let mut spec = TopicSpec::new(
+                &t.name,
+                &t.message_type,
+                t.rate_hz.unwrap_or(0.0),
+                TopicKind::Extra,
+                "",
+            );
+            spec.latched = t.latched;
+            out.push(spec);
+        }
+        out
+    }
+}
