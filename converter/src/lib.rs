@@ -26,7 +26,8 @@
 //! Every error is an [`Error`] naming the file and what is wrong with it.
 
 mod actions;
-mod align;
+/// The alignment rules (their own crate: the recorder's verdict applies the same ones).
+pub use scaledp_align as align;
 mod batch;
 mod decode;
 mod destination;

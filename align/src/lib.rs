@@ -5,8 +5,19 @@
 //! interpolated. A camera frame older than `stale_periods` frame periods, or a joint stream with
 //! no samples around the tick, makes the tick invalid; invalid ticks at either end are trimmed,
 //! interior ones are counted (and the episode rejected past a threshold).
+//!
+//! Its own crate because three places must apply the very same rules: `scaledp convert`
+//! (training data), the recorder's verdict on each episode before the scene is reset, and
+//! `serve`'s live observations. It depends on nothing but serde.
 
 use serde::{Deserialize, Serialize};
+
+/// A camera frame older than this many frame periods at its tick makes the tick invalid
+/// (`scaledp convert --stale-periods`).
+pub const DEFAULT_STALE_PERIODS: f64 = 1.5;
+/// An episode with more invalid ticks inside its kept range than this fraction is rejected
+/// (`scaledp convert --max-invalid-fraction`).
+pub const DEFAULT_MAX_INVALID_FRACTION: f64 = 0.05;
 
 /// One time series: capture stamps (ns, non-decreasing) and its nominal period (s).
 #[derive(Debug, Clone)]
@@ -55,12 +66,12 @@ impl Stream {
 }
 
 /// Index of the latest of `stamps_ns` (ascending) at or before `t_ns`.
-pub(crate) fn latest_at(stamps_ns: &[u64], t_ns: u64) -> Option<usize> {
+pub fn latest_at(stamps_ns: &[u64], t_ns: u64) -> Option<usize> {
     stamps_ns.partition_point(|&s| s <= t_ns).checked_sub(1)
 }
 
 /// (i, i + 1, weight of i + 1) of `stamps_ns` bracketing `t_ns`, or the exact sample.
-pub(crate) fn bracket(stamps_ns: &[u64], t_ns: u64) -> Option<(usize, usize, f64)> {
+pub fn bracket(stamps_ns: &[u64], t_ns: u64) -> Option<(usize, usize, f64)> {
     let i = latest_at(stamps_ns, t_ns)?;
     if stamps_ns[i] == t_ns || i + 1 >= stamps_ns.len() {
         return (stamps_ns[i] == t_ns).then_some((i, i, 0.0));
@@ -72,12 +83,7 @@ pub(crate) fn bracket(stamps_ns: &[u64], t_ns: u64) -> Option<(usize, usize, f64
 /// The frame rule: the latest of a camera's frames (stamps ascending, nominal period
 /// `period_s`) at or before `t_ns` (the first when none is), and whether it is fresh — at or
 /// before the tick and at most `stale_periods` periods old.
-pub(crate) fn frame_at(
-    stamps_ns: &[u64],
-    period_s: f64,
-    t_ns: u64,
-    stale_periods: f64,
-) -> (usize, bool) {
+pub fn frame_at(stamps_ns: &[u64], period_s: f64, t_ns: u64, stale_periods: f64) -> (usize, bool) {
     let i = latest_at(stamps_ns, t_ns).unwrap_or(0);
     let s = stamps_ns.get(i).copied().unwrap_or(u64::MAX);
     let age_s = t_ns.saturating_sub(s) as f64 * 1e-9;
@@ -89,7 +95,7 @@ pub(crate) fn frame_at(
 /// is sound — the samples around the tick at most [`max_hole_s`] apart, so no motion is
 /// invented across a hole. `tick_s` is the period of the ticks sampled (the dataset's or the
 /// controller's).
-pub(crate) fn sample_at(
+pub fn sample_at(
     stamps_ns: &[u64],
     period_s: f64,
     t_ns: u64,
@@ -332,7 +338,7 @@ fn blame_list(all: &[&Stream], blamed: &[Vec<usize>]) -> String {
 /// Ticks on the frame instants would let capture jitter split synchronised cameras a whole frame
 /// apart (one camera's frame stamped a little before the tick, the other's a little after);
 /// a quarter period later every camera's capture of that instant is in. Shared with
-/// [`crate::prefetch`], which must predict the same ticks while the file streams past.
+/// the converter's prefetcher, which must predict the same ticks while the file streams past.
 pub fn first_tick(
     start: u64,
     latest_camera_first: Option<u64>,
@@ -373,5 +379,4 @@ fn stream_report(s: &Stream) -> StreamReport {
 }
 
 #[cfg(test)]
-#[path = "align_tests.rs"]
 mod tests;
