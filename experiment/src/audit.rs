@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::results::{git_revision, machine, now_utc};
+use crate::provenance::{git_revision, machine, now_utc};
 
 /// The schema's version: files without it (or older) predate the audit and belong in
 /// `docs/results/historical/`.
@@ -250,7 +250,7 @@ pub fn record_trainer(run: &Path) -> Result<Binary> {
     }
     std::fs::create_dir_all(run).with_context(|| format!("creating {}", run.display()))?;
     let b = Binary::this();
-    crate::results::write_json(&path, &b)?;
+    crate::provenance::write_json(&path, &b)?;
     std::fs::write(run.join("REVISION"), format!("{}\n", b.revision))
         .with_context(|| format!("writing {}", run.display()))?;
     Ok(b)

@@ -25,7 +25,7 @@ use plotters::prelude::*;
 use scaledp_policy::{Architecture, TrainOptions, Trainer, DPT_DIMS};
 use serde::{Deserialize, Serialize};
 
-use crate::results::Provenance;
+use crate::provenance::Provenance;
 
 /// `scaledp experiment grad-scale`.
 #[derive(Debug, Clone, Args)]

@@ -18,8 +18,10 @@ mod arms;
 pub mod audit;
 mod benchmark;
 mod evaluate;
+mod figures;
 mod grad_scale;
 mod plot;
+mod provenance;
 mod results;
 mod significance;
 mod train;
@@ -33,11 +35,12 @@ use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
 
 pub use args::{Benchmark, CompareArgs, ExperimentCommand, ReportArgs};
 pub use arms::{Arm, ARMS};
+pub use figures::EvalFigures;
 pub use grad_scale::GradScaleArgs;
-pub use results::{ArmResult, EvalFigures};
+pub use results::ArmResult;
 
 use evaluate::{EvalPlan, Kind};
-use results::{Controls, ValPoint};
+use figures::{Controls, ValPoint};
 
 /// Runs one `scaledp experiment` command; `stop` (set by Ctrl-C) checkpoints a training run and
 /// returns.

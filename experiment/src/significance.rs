@@ -10,7 +10,7 @@
 //! the tables say so.
 
 use crate::arms::arm;
-use crate::results::EvalFigures;
+use crate::figures::EvalFigures;
 
 /// The recipe arm every other arm is held against.
 pub(crate) const RECIPE: &str = "ti";

@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+pub mod house;
 pub mod s3;
 
 pub use scaledp_testkit::{

@@ -87,3 +87,27 @@ fn one_arrow_is_compiled() {
         "arrow-array majors {majors:?}: the workspace's arrow must match rerun's"
     );
 }
+
+/// No circle of imports between the files of a crate's main path: a reader can take a crate's
+/// files in an order where each one only uses what came before.
+#[test]
+fn no_import_circle_between_files() {
+    let circles = scaledp_tests::house::import_circles(&scaledp_tests::workspace());
+    assert!(
+        circles.is_empty(),
+        "{} import circles:\n{}",
+        circles.len(),
+        circles.join("\n")
+    );
+}
+
+/// No source file over 500 lines (tests included): a long file is a module that wants splitting.
+#[test]
+fn no_file_over_500_lines() {
+    let long = scaledp_tests::house::long_files(&scaledp_tests::workspace(), 500);
+    assert!(
+        long.is_empty(),
+        "files over 500 lines:\n{}",
+        long.join("\n")
+    );
+}

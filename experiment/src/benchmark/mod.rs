@@ -7,6 +7,8 @@
 //! where it stopped and lands its JSON as it finishes; the table (by difficulty level) and the
 //! plot are rebuilt from the files that are there.
 
+mod cells;
+mod chart;
 mod kind;
 mod replicates;
 mod report;
@@ -30,7 +32,8 @@ pub use rescore::Earlier;
 use crate::arms::Arm;
 use crate::audit::{self, Audit, Binary, Collection};
 use crate::evaluate::{self, EvalPlan, Kind};
-use crate::results::{self, Controls, EvalFigures};
+use crate::figures::{Controls, EvalFigures};
+use crate::provenance::write_json;
 use crate::{train, Benchmark, CompareArgs, Settings};
 
 /// One (task, arm) result: `RESULTS/NAME/<task>--<arm>.json`.
@@ -352,7 +355,7 @@ pub(crate) fn run(
                 earlier_scores: Vec::new(),
                 rescore_command: None,
             };
-            results::write_json(&path, &result)?;
+            write_json(&path, &result)?;
             println!(
                 "{task} {}: test {} after {} steps ({:.2} h of training); {}",
                 arm.name,
@@ -416,7 +419,7 @@ fn controls(
         earlier_scores: Vec::new(),
         rescore_command: None,
     };
-    results::write_json(&path, &c)?;
+    write_json(&path, &c)?;
     rebuild(results_dir)
 }
 

@@ -2,7 +2,7 @@
 //! result is its own file; the table shows them side by side, pairs arms trained from the same
 //! seed, and averages seeds before tasks.
 
-use super::report::{marked, Level};
+use super::cells::{marked, Level};
 use super::TaskResult;
 use crate::significance::{seed_suffix, Pairing, RECIPE};
 
@@ -66,7 +66,7 @@ pub(super) fn pairings<'a>(
 mod tests {
     use super::super::{rebuild, result_path};
     use super::*;
-    use crate::results::EvalFigures;
+    use crate::figures::EvalFigures;
 
     fn result(arm: &str, seed: u64, successes: u64) -> TaskResult {
         let test = EvalFigures::counts(successes, 50);

@@ -16,7 +16,8 @@ use serde::{Deserialize, Serialize};
 use super::{rebuild, result_path, run_dir, score_controls, TaskControls, TaskResult};
 use crate::audit::{self, Audit, Binary};
 use crate::evaluate::{self, EvalPlan, Kind};
-use crate::results::{self, Controls, EvalFigures};
+use crate::figures::{Controls, EvalFigures};
+use crate::provenance::write_json;
 use crate::{Benchmark, CompareArgs, Settings};
 
 /// What a result file said before a re-score.
@@ -152,7 +153,7 @@ fn task_result(
     r.audit.scored_by = Binary::this();
     r.test = test;
     r.rescore_command = Some(command);
-    results::write_json(path, &r)?;
+    write_json(path, &r)?;
     Ok(format!(
         "test {} (was {was}); {}",
         r.test.cell(),
@@ -192,7 +193,7 @@ fn controls(
     c.audit.simulator = simulator;
     c.audit.scored_by = Binary::this();
     c.rescore_command = Some(command);
-    results::write_json(path, &c)?;
+    write_json(path, &c)?;
     Ok(format!("{line}; {}", path.display()))
 }
 
