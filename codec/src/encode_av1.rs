@@ -9,7 +9,7 @@ use rav1e::prelude::{
     SceneDetectionSpeed, SpeedSettings, TransferCharacteristics,
 };
 
-use crate::encode::{EncodeError, Planes, Samples, VideoSettings};
+use crate::encoding::{EncodeError, Planes, Samples, VideoSettings};
 
 /// OBU types.
 const OBU_SEQUENCE_HEADER: u8 = 1;

@@ -11,7 +11,7 @@ use openh264::encoder::{
 use openh264::formats::YUVSlices;
 use openh264::OpenH264API;
 
-use crate::encode::{EncodeError, Planes, Samples, VideoSettings};
+use crate::encoding::{EncodeError, Planes, Samples, VideoSettings};
 
 /// NAL unit types.
 const NAL_IDR: u8 = 5;

@@ -14,6 +14,7 @@ mod decode;
 mod encode;
 mod encode_av1;
 mod encode_h264;
+mod encoding;
 mod mp4;
 mod yuv;
 
@@ -21,6 +22,7 @@ mod yuv;
 mod roundtrip_tests;
 
 pub use decode::{new_decoder, parse_avcc, Codec, Decode};
-pub use encode::{EncodeError, EncodedVideo, VideoEncoder, VideoSettings, DEFAULT_AV1_SPEED};
+pub use encode::VideoEncoder;
+pub use encoding::{EncodeError, EncodedVideo, VideoSettings, DEFAULT_AV1_SPEED};
 pub use mp4::{mp4_file, Mp4Error};
 pub use yuv::Yuv420;

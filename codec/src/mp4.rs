@@ -4,7 +4,7 @@
 //! (episode) is one chunk; chunk offsets switch to `co64` past 4 GiB.
 
 use crate::decode::Codec;
-use crate::encode::EncodedVideo;
+use crate::encoding::EncodedVideo;
 
 /// Why an MP4 file could not be written.
 #[derive(Debug, thiserror::Error)]

@@ -20,8 +20,8 @@ use scaledp_sim::{messages, ArmCommand};
 
 use crate::controller::{ControlOptions, Controller};
 use crate::error::{Error, Result};
-use crate::eval::{summarize, EpisodeReport, EvalOptions, EvalReport, ORIGIN_NS};
 use crate::recording::Rollout;
+use crate::report::{summarize, EpisodeReport, EvalOptions, EvalReport, ORIGIN_NS};
 use crate::stats::{percentile, stage_counts};
 
 /// Hands one observation to the controller (and the rollout), stamped `t_ns`.

@@ -10,7 +10,7 @@ use scaledp_schema::Rig;
 use scaledp_sim::{OfflineRun, Scene};
 
 use crate::error::{Error, Result};
-use crate::eval::{summarize, EpisodeReport, EvalOptions, EvalReport};
+use crate::report::{summarize, EpisodeReport, EvalOptions, EvalReport};
 
 /// Simulated-time step of the expert's episodes (the operator samples its leader at 100 Hz).
 const STEP_NS: u64 = 10_000_000;

@@ -31,6 +31,7 @@ mod inputs;
 pub mod live;
 mod options;
 mod recording;
+mod report;
 pub mod safety;
 pub mod serve;
 pub mod stats;

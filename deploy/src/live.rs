@@ -15,7 +15,7 @@ use scaledp_schema::Rig;
 use scaledp_sim::SimOptions;
 
 use crate::error::Result;
-use crate::eval::{summarize, EpisodeReport, EvalOptions, EvalReport};
+use crate::report::{summarize, EpisodeReport, EvalOptions, EvalReport};
 use crate::serve::{ServeOptions, Server};
 use crate::stats::percentile;
 

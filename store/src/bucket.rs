@@ -10,7 +10,6 @@ use std::future::Future;
 use std::ops::Range;
 use std::path::Path;
 use std::sync::{Arc, Mutex, OnceLock};
-use std::time::Duration;
 
 use bytes::Bytes;
 use futures::stream::{FuturesUnordered, StreamExt, TryStreamExt};
@@ -18,8 +17,10 @@ use object_store::path::Path as Key;
 use object_store::{GetOptions, GetRange, ObjectStore, PutPayload};
 
 use crate::config::S3Settings;
-use crate::error::{chain, s3_code, s3_message, Error, Result};
-use crate::location::ObjectUrl;
+use crate::describe::Describe;
+use crate::error::{chain, Error, Result};
+use crate::location::{ObjectInfo, ObjectUrl};
+use crate::runtime::{block, retry_config};
 
 /// Size of each part of a multipart upload (S3 wants at least 5 MiB but for the last part); a
 /// file no larger than this is one PUT.
@@ -28,161 +29,6 @@ pub const PART_BYTES: usize = 8 << 20;
 const PARTS_IN_FLIGHT: usize = 4;
 /// Ranged reads of one call in flight at once.
 const RANGES_IN_FLIGHT: usize = 8;
-
-/// The retry policy of every request: object_store retries connection errors, timeouts of
-/// safe requests and 5xx / throttling answers with exponential backoff (0.2 s doubling up to 5
-/// s, jittered), at most `SCALEDP_S3_RETRIES` times (default 5) and for at most
-/// `SCALEDP_S3_RETRY_TIMEOUT_S` seconds (default 60) from the first attempt.
-pub fn retry_config() -> object_store::RetryConfig {
-    let var = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<u64>().ok());
-    object_store::RetryConfig {
-        backoff: object_store::BackoffConfig {
-            init_backoff: Duration::from_millis(200),
-            max_backoff: Duration::from_secs(5),
-            base: 2.0,
-        },
-        max_retries: var("SCALEDP_S3_RETRIES").map_or(5, |n| n as usize),
-        retry_timeout: Duration::from_secs(var("SCALEDP_S3_RETRY_TIMEOUT_S").unwrap_or(60)),
-    }
-}
-
-/// The runtime every bucket's requests run on (two I/O threads; the work is waiting).
-fn runtime() -> Result<&'static tokio::runtime::Runtime> {
-    static RT: OnceLock<std::result::Result<tokio::runtime::Runtime, String>> = OnceLock::new();
-    RT.get_or_init(|| {
-        tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .thread_name("scaledp-store")
-            .enable_all()
-            .build()
-            .map_err(|e| e.to_string())
-    })
-    .as_ref()
-    .map_err(|e| Error::Config {
-        what: "object storage".into(),
-        reason: format!("cannot start the I/O runtime: {e}"),
-    })
-}
-
-/// Runs `f` to completion on the shared runtime from a synchronous caller.
-pub(crate) fn block<F: Future>(f: F) -> Result<F::Output> {
-    Ok(runtime()?.block_on(f))
-}
-
-impl Describe {
-    /// An object_store error on `url` while trying to `action` as one [`Error`].
-    pub(crate) fn error(
-        &self,
-        url: &ObjectUrl,
-        action: &'static str,
-        e: object_store::Error,
-    ) -> Error {
-        let text = chain(&e);
-        let code = s3_code(&text);
-        let url_text = url.to_string();
-        let credential_codes = [
-            "InvalidAccessKeyId",
-            "SignatureDoesNotMatch",
-            "ExpiredToken",
-            "InvalidToken",
-            "TokenRefreshRequired",
-            "AuthorizationHeaderMalformed",
-        ];
-        // List requests come back as generic errors whatever the status: the S3 code decides
-        // first, then the kind object_store gave.
-        let kind = match (&e, code.as_deref()) {
-            (_, Some("NoSuchBucket")) => "bucket",
-            (_, Some("NoSuchKey" | "NotFound")) | (object_store::Error::NotFound { .. }, None) => {
-                "object"
-            }
-            (_, Some(c)) if credential_codes.contains(&c) => "credentials",
-            (_, Some("AccessDenied" | "AllAccessDisabled" | "AccountProblem")) => "denied",
-            (
-                object_store::Error::PermissionDenied { .. }
-                | object_store::Error::Unauthenticated { .. },
-                _,
-            ) => "denied",
-            (object_store::Error::NotFound { .. }, Some(_)) => "object",
-            (_, None)
-                if [
-                    "error sending request",
-                    "connect",
-                    "timed out",
-                    "Connection",
-                    "reset",
-                    "closed",
-                ]
-                .iter()
-                .any(|w| text.contains(w)) =>
-            {
-                "network"
-            }
-            _ => "other",
-        };
-        let code = code.unwrap_or_else(|| "HTTP 403".into());
-        match kind {
-            "bucket" => Error::NoSuchBucket {
-                url: url_text,
-                bucket: self.name.clone(),
-                endpoint: self.endpoint.clone(),
-            },
-            "object" => Error::NotFound { url: url_text },
-            "credentials" => Error::Credentials {
-                url: url_text,
-                code,
-                source_of_credentials: self.credentials_from.clone(),
-            },
-            "denied" => Error::Denied {
-                url: url_text,
-                action,
-                code,
-                source_of_credentials: self.credentials_from.clone(),
-            },
-            "network" => Error::Network {
-                url: url_text,
-                reason: format!(
-                    "network error talking to {} (gave up after the retries): {text}",
-                    self.endpoint
-                ),
-            },
-            _ => Error::Other {
-                url: url_text,
-                reason: s3_message(&text).unwrap_or(text),
-            },
-        }
-    }
-
-    /// A read error, a failed `If-Match` becoming [`Error::Changed`].
-    fn read_error(&self, info: &ObjectInfo, e: object_store::Error) -> Error {
-        match (&e, &info.etag) {
-            (object_store::Error::Precondition { .. }, Some(etag)) => Error::Changed {
-                url: info.url.to_string(),
-                etag: etag.clone(),
-            },
-            _ => self.error(&info.url, "read", e),
-        }
-    }
-}
-
-/// Starts `f` on the shared runtime.
-pub(crate) fn spawn<F>(f: F) -> Result<tokio::task::JoinHandle<F::Output>>
-where
-    F: Future + Send + 'static,
-    F::Output: Send + 'static,
-{
-    Ok(runtime()?.spawn(f))
-}
-
-/// One object as listed: its URL, size and ETag.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct ObjectInfo {
-    /// Where it is.
-    pub url: ObjectUrl,
-    /// Bytes.
-    pub size: u64,
-    /// Its ETag (the store's fingerprint of this version), when the store gives one.
-    pub etag: Option<String>,
-}
 
 /// A client for one bucket.
 pub struct Bucket {
@@ -198,13 +44,6 @@ impl std::fmt::Debug for Bucket {
             self.describe.name, self.describe.endpoint
         )
     }
-}
-
-/// What errors of a bucket mention: its name, endpoint, where its credentials come from.
-pub(crate) struct Describe {
-    name: String,
-    endpoint: String,
-    credentials_from: String,
 }
 
 impl Bucket {

@@ -18,12 +18,15 @@
 
 mod bucket;
 mod config;
+mod describe;
 mod error;
 mod location;
 mod reader;
+mod runtime;
 
-pub use bucket::{retry_config, Bucket, ObjectInfo, PART_BYTES};
+pub use bucket::{Bucket, PART_BYTES};
 pub use config::S3Settings;
 pub use error::{Error, Result};
-pub use location::{Location, ObjectUrl};
+pub use location::{Location, ObjectInfo, ObjectUrl};
 pub use reader::{ObjectReader, BLOCKS_AHEAD, BLOCK_BYTES};
+pub use runtime::retry_config;

@@ -131,6 +131,17 @@ impl fmt::Display for Location {
     }
 }
 
+/// One object as listed: its URL, size and ETag.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ObjectInfo {
+    /// Where it is.
+    pub url: ObjectUrl,
+    /// Bytes.
+    pub size: u64,
+    /// Its ETag (the store's fingerprint of this version), when the store gives one.
+    pub etag: Option<String>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

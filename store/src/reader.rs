@@ -9,8 +9,10 @@ use std::sync::Arc;
 use bytes::{Buf, Bytes};
 use tokio::task::JoinHandle;
 
-use crate::bucket::{block, spawn, Bucket, ObjectInfo};
+use crate::bucket::Bucket;
 use crate::error::{Error, Result};
+use crate::location::ObjectInfo;
+use crate::runtime::{block, spawn};
 
 /// Bytes of one block.
 pub const BLOCK_BYTES: u64 = 8 << 20;

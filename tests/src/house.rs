@@ -77,81 +77,219 @@ fn main_path_text(text: &str) -> String {
     out
 }
 
-/// The modules a file's code refers to, resolved against the modules that exist.
-fn references(own: &str, text: &str, known: &BTreeMap<String, PathBuf>) -> BTreeSet<String> {
-    let own_parts: Vec<&str> = if own.is_empty() {
-        vec![]
-    } else {
-        own.split("::").collect()
-    };
-    let mut out = BTreeSet::new();
-    let bytes = text.as_bytes();
+/// The paths a `use` tree names, expanded (`a::{b, c::d as e}` → `a::b`, `a::c::d`).
+fn expand_use(prefix: &[String], tree: &str, out: &mut Vec<Vec<String>>) {
+    let tree = tree.trim();
+    if tree.is_empty() {
+        return;
+    }
+    if let Some(open) = tree.find('{') {
+        let head: Vec<String> = tree[..open]
+            .split("::")
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(String::from)
+            .collect();
+        let inner = &tree[open + 1..tree.rfind('}').unwrap_or(tree.len())];
+        let base: Vec<String> = prefix.iter().cloned().chain(head).collect();
+        // Split the group on top-level commas.
+        let (mut depth, mut start) = (0, 0);
+        for (i, c) in inner.char_indices() {
+            match c {
+                '{' => depth += 1,
+                '}' => depth -= 1,
+                ',' if depth == 0 => {
+                    expand_use(&base, &inner[start..i], out);
+                    start = i + 1;
+                }
+                _ => {}
+            }
+        }
+        expand_use(&base, &inner[start..], out);
+        return;
+    }
+    let path = tree.split(" as ").next().unwrap_or(tree);
+    let mut full: Vec<String> = prefix.to_vec();
+    full.extend(
+        path.split("::")
+            .map(str::trim)
+            .filter(|s| !s.is_empty() && *s != "self")
+            .map(String::from),
+    );
+    out.push(full);
+}
+
+/// A file's `use` statements (expanded), each with whether it is re-exported (`pub use`), and
+/// its code with the `use` statements taken out.
+fn split_uses(text: &str) -> (Vec<(bool, Vec<String>)>, String) {
+    let mut uses = Vec::new();
+    let mut code = String::new();
+    let mut rest = text;
+    while let Some(pos) = find_use(rest) {
+        code.push_str(&rest[..pos]);
+        let stmt_start = pos;
+        let after = &rest[stmt_start..];
+        let end = after.find(';').unwrap_or(after.len());
+        let stmt = &after[..end];
+        let public = stmt.trim_start().starts_with("pub");
+        let tree = &stmt[stmt.find("use ").map_or(0, |u| u + 4)..];
+        let mut paths = Vec::new();
+        expand_use(&[], tree, &mut paths);
+        uses.extend(paths.into_iter().map(|p| (public, p)));
+        rest = &after[(end + 1).min(after.len())..];
+    }
+    code.push_str(rest);
+    (uses, code)
+}
+
+/// Where the next `use` statement (with its visibility) starts.
+fn find_use(text: &str) -> Option<usize> {
+    let mut from = 0;
+    while let Some(i) = text[from..].find("use ") {
+        let at = from + i;
+        let line_start = text[..at].rfind('\n').map_or(0, |n| n + 1);
+        let before = text[line_start..at].trim();
+        if before.is_empty() || before.starts_with("pub") {
+            return Some(
+                line_start + text[line_start..].len() - text[line_start..].trim_start().len(),
+            );
+        }
+        from = at + 4;
+    }
+    None
+}
+
+/// One file as the graph sees it: its module path, its uses and its code.
+struct File {
+    uses: Vec<(bool, Vec<String>)>,
+    code: String,
+}
+
+/// The module a path names from inside `own`, through re-exports (`pub use`) to the module
+/// that defines the item; `None` for paths outside the crate.
+fn resolve(
+    own: &[String],
+    path: &[String],
+    files: &BTreeMap<String, File>,
+    depth: usize,
+) -> Option<String> {
+    let mut base: Vec<String> = Vec::new();
+    let mut k = 0;
+    match path.first().map(String::as_str) {
+        Some("crate") => k = 1,
+        Some("self") => {
+            base = own.to_vec();
+            k = 1;
+        }
+        Some("super") => {
+            base = own.to_vec();
+            while path.get(k).map(String::as_str) == Some("super") {
+                base.pop();
+                k += 1;
+            }
+        }
+        Some(first) => {
+            let child: Vec<String> = own.iter().cloned().chain([first.to_string()]).collect();
+            if !files.contains_key(&child.join("::")) {
+                return None;
+            }
+            base = own.to_vec();
+        }
+        None => return None,
+    }
+    let mut module = base.clone();
+    let mut j = k;
+    while j < path.len() {
+        let mut next = module.clone();
+        next.push(path[j].clone());
+        if files.contains_key(&next.join("::")) {
+            module = next;
+            j += 1;
+        } else {
+            break;
+        }
+    }
+    let name = module.join("::");
+    // The item after the module: follow the module's re-export of it, if any.
+    if let (Some(item), Some(file), true) = (path.get(j), files.get(&name), depth < 6) {
+        for (public, used) in &file.uses {
+            if *public && used.last() == Some(item) {
+                if let Some(m) = resolve(&module, used, files, depth + 1) {
+                    return Some(m);
+                }
+            }
+        }
+    }
+    files.contains_key(&name).then_some(name)
+}
+
+/// The paths with `::` in a file's code (outside its `use` statements).
+fn code_paths(code: &str) -> Vec<Vec<String>> {
+    let mut out = Vec::new();
+    let bytes = code.as_bytes();
     let ident = |c: u8| c.is_ascii_alphanumeric() || c == b'_' || c == b':';
     let mut i = 0;
     while i < bytes.len() {
-        if !text.is_char_boundary(i) {
+        if !code.is_char_boundary(i) || (i > 0 && ident(bytes[i - 1])) {
             i += 1;
             continue;
         }
-        let rest = &text[i..];
-        let start = ["crate::", "super::", "self::"]
-            .iter()
-            .find(|p| rest.starts_with(**p) && (i == 0 || !ident(bytes[i - 1])));
-        let Some(_) = start else {
-            i += 1;
-            continue;
-        };
+        let rest = &code[i..];
         let end = rest
             .find(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':'))
             .unwrap_or(rest.len());
-        let path: Vec<&str> = rest[..end].split("::").filter(|s| !s.is_empty()).collect();
+        if end > 0 && rest[..end].contains("::") {
+            out.push(
+                rest[..end]
+                    .split("::")
+                    .filter(|s| !s.is_empty())
+                    .map(String::from)
+                    .collect(),
+            );
+        }
         i += end.max(1);
-        let mut base: Vec<&str> = Vec::new();
-        let mut k = 0;
-        match path.first() {
-            Some(&"crate") => k = 1,
-            Some(&"self") => {
-                base = own_parts.clone();
-                k = 1;
-            }
-            Some(&"super") => {
-                base = own_parts.clone();
-                while path.get(k) == Some(&"super") {
-                    base.pop();
-                    k += 1;
-                }
-            }
-            _ => continue,
-        }
-        // The longest prefix that names a module file.
-        let mut target = base.join("::");
-        let mut cur = base.clone();
-        for seg in &path[k..] {
-            cur.push(seg);
-            let name = cur.join("::");
-            if known.contains_key(&name) {
-                target = name;
-            } else {
-                break;
-            }
-        }
-        if target != own && known.contains_key(&target) {
-            out.insert(target);
-        }
     }
     out
 }
 
-/// The strongly connected groups (more than one file) of a crate's import graph.
-fn circles(src: &Path) -> Vec<Vec<String>> {
-    let known = modules(src);
-    let graph: BTreeMap<String, BTreeSet<String>> = known
+/// Whether paths written inline in code (`crate::a::f()`) count as imports too.
+const INLINE_PATHS: bool = false;
+
+/// Each file's modules it refers to (itself and the crate root's declarations aside).
+fn graph(known: &BTreeMap<String, PathBuf>) -> BTreeMap<String, BTreeSet<String>> {
+    let files: BTreeMap<String, File> = known
         .iter()
         .map(|(m, p)| {
-            let text = std::fs::read_to_string(p).unwrap_or_default();
-            (m.clone(), references(m, &main_path_text(&text), &known))
+            let text = main_path_text(&std::fs::read_to_string(p).unwrap_or_default());
+            let (uses, code) = split_uses(&text);
+            (m.clone(), File { uses, code })
         })
         .collect();
+    files
+        .iter()
+        .map(|(m, f)| {
+            let own: Vec<String> = if m.is_empty() {
+                vec![]
+            } else {
+                m.split("::").map(String::from).collect()
+            };
+            let inline = if INLINE_PATHS { code_paths(&f.code) } else { Vec::new() };
+            let refs = f
+                .uses
+                .iter()
+                .map(|(_, p)| p.clone())
+                .chain(inline)
+                .filter_map(|p| resolve(&own, &p, &files, 0))
+                .filter(|t| t != m)
+                .collect();
+            (m.clone(), refs)
+        })
+        .collect()
+}
+
+/// The strongly connected groups (more than one file) of a crate's import graph.
+fn circles(src: &Path) -> Vec<Vec<String>> {
+    let graph = graph(&modules(src));
     // Kosaraju: two depth-first passes.
     fn visit(
         n: &str,
@@ -262,7 +400,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let src = dir.path().join("src");
         std::fs::create_dir_all(src.join("a")).unwrap();
-        std::fs::write(src.join("lib.rs"), "mod a;\nmod b;\n").unwrap();
+        std::fs::write(src.join("lib.rs"), "mod a;\nmod b;\nmod d;\nuse d::Top;\n").unwrap();
+        std::fs::write(src.join("d.rs"), "use crate::b::Z;\n").unwrap();
         std::fs::write(
             src.join("a/mod.rs"),
             "mod c;\nuse crate::b::X; // crate::c\n",
@@ -274,6 +413,18 @@ mod tests {
             "use super::Z;\n#[cfg(test)]\nmod tests {\n    use crate::b::Q;\n}\n",
         )
         .unwrap();
+        // `a ↔ b` through `crate::` and `super::`; the root reaches `d` by a relative path,
+        // and `d` reaches `b`, which is no circle.
         assert_eq!(circles(&src), vec![vec!["a".to_string(), "b".to_string()]]);
+        std::fs::write(src.join("b.rs"), "pub use super::a::Y;\nuse crate::Top;\n").unwrap();
+        assert_eq!(
+            circles(&src),
+            vec![vec![
+                "".to_string(),
+                "a".to_string(),
+                "b".to_string(),
+                "d".to_string()
+            ]]
+        );
     }
 }
