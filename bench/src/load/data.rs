@@ -16,6 +16,10 @@ use scaledp_schema::Rig;
 
 use crate::synth::synthesize;
 
+/// The loader's shape every route samples: observation steps and action chunk.
+pub(super) const OBS_HORIZON: usize = 2;
+pub(super) const ACTION_CHUNK: usize = 16;
+
 const RIG: &str = "bimanual_ur5_3rs";
 const TASK: &str = "hand the cup from the left arm to the right";
 /// The stored image size.

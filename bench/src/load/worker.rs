@@ -10,7 +10,7 @@ use anyhow::{bail, Context, Result};
 use scaledp_datasets::LoaderOptions;
 use scaledp_testkit::{measure, Measured};
 
-use super::{ACTION_CHUNK, OBS_HORIZON};
+use super::data::{ACTION_CHUNK, OBS_HORIZON};
 use crate::{BenchLoadArgs, Outcome, WorkerMode};
 
 /// What a worker (one loader epoch) reports on its last stdout line.

@@ -15,7 +15,7 @@ use scaledp_schema::RosMessage;
 use scaledp_sim::messages;
 use zenoh::Wait;
 
-use super::{lock, CommandHook, Input, Status};
+use super::shared::{lock, CommandHook, Input, Status};
 use crate::controller::{Command, Controller, Request};
 use crate::stats::percentile;
 

@@ -8,8 +8,8 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 
 use super::cells::{level_of, Level};
+use super::files::TaskResult;
 use super::replicates::replicates;
-use super::TaskResult;
 
 pub(super) type Means = Vec<(Level, (usize, Vec<f64>))>;
 

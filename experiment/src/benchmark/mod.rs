@@ -9,12 +9,13 @@
 
 mod cells;
 mod chart;
+mod files;
 mod kind;
 mod replicates;
 mod report;
 mod rescore;
+mod scoring;
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::AtomicBool;
@@ -24,110 +25,18 @@ use anyhow::{bail, Context, Result};
 use scaledp_deploy::Split;
 use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
 use scaledp_schema::{ActionSpace, Rig};
-use serde::{Deserialize, Serialize};
 
+use files::{result_path, run_dir};
+pub use files::{TaskControls, TaskResult};
 pub(crate) use report::{is_benchmark, rebuild};
-pub use rescore::Earlier;
+use scoring::score_controls;
 
 use crate::arms::Arm;
 use crate::audit::{self, Audit, Binary, Collection};
 use crate::evaluate::{self, EvalPlan, Kind};
-use crate::figures::{Controls, EvalFigures};
+use crate::figures::EvalFigures;
 use crate::provenance::write_json;
 use crate::{train, Benchmark, CompareArgs, Settings};
-
-/// One (task, arm) result: `RESULTS/NAME/<task>--<arm>.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TaskResult {
-    /// `metaworld`, `aloha`.
-    pub benchmark: String,
-    /// The task (`assembly`).
-    pub task: String,
-    /// Its level (MetaWorld's `easy`, `medium`, `hard`, `very hard`; ALOHA's `bimanual`).
-    pub level: String,
-    /// The arm (`ti`, `dp-t`).
-    pub arm: String,
-    /// Its training seed (0 unless `--train-seed`: a replicate).
-    #[serde(default)]
-    pub train_seed: u64,
-    /// What it is.
-    pub what: String,
-    /// Test-seed success rate of the last checkpoint (0–1): the reported figure.
-    pub test_success_rate: f64,
-    /// The test seeds.
-    pub test_seeds: Vec<u64>,
-    /// 95 % Wilson interval of the test success rate.
-    pub wilson_low: f64,
-    /// 95 % Wilson interval of the test success rate.
-    pub wilson_high: f64,
-    /// The test evaluation in full.
-    pub test: EvalFigures,
-    /// Hours of training (Σ of the steps' wall times).
-    pub train_hours: f64,
-    /// Optimizer steps.
-    pub steps: u64,
-    /// Mean wall time of a step (s).
-    pub step_s: f64,
-    /// The checkpoint scored.
-    pub checkpoint: String,
-    /// Denoiser parameters.
-    pub denoiser_params: usize,
-    /// Encoder parameters.
-    pub encoder_params: usize,
-    /// Successful demonstrations trained on.
-    pub demonstrations: u64,
-    /// The command that produced this file.
-    pub command: String,
-    /// The equivalent `scaledp train` command.
-    pub train_command: String,
-    /// The training settings.
-    pub train_options: serde_json::Value,
-    /// Who trained and scored it, on what, from which demonstrations.
-    pub audit: Audit,
-    /// What the file said before each re-score (`compare --rescore`), the oldest first.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub earlier_scores: Vec<Earlier<EvalFigures>>,
-    /// The command of the latest re-score, if any.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rescore_command: Option<String>,
-}
-
-/// A task's controls: `RESULTS/NAME/<task>--controls.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TaskControls {
-    /// The task.
-    pub task: String,
-    /// Its level.
-    pub level: String,
-    /// The arm whose checkpoints the untrained and frozen controls use.
-    pub arm: String,
-    /// The controls.
-    pub controls: Controls,
-    /// Who trained the arm's checkpoints and who scored the controls.
-    pub audit: Audit,
-    /// What the file said before each re-score (`compare --rescore`), the oldest first.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub earlier_scores: Vec<Earlier<Controls>>,
-    /// The command of the latest re-score, if any.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rescore_command: Option<String>,
-}
-
-/// The file of (task, arm) trained from `seed`.
-fn result_path(dir: &Path, task: &str, arm: &str, seed: u64) -> PathBuf {
-    match seed {
-        0 => dir.join(format!("{task}--{arm}.json")),
-        s => dir.join(format!("{task}--{arm}--seed{s}.json")),
-    }
-}
-
-/// The run directory of an arm trained from `seed`.
-fn run_dir(task_dir: &Path, arm: &str, seed: u64) -> PathBuf {
-    match seed {
-        0 => task_dir.join(arm),
-        s => task_dir.join(format!("{arm}-seed{s}")),
-    }
-}
 
 /// Successful episodes listed in a `collect.jsonl`, and the next unused seed.
 fn collected(demos: &Path) -> (u64, u64) {
@@ -421,36 +330,6 @@ fn controls(
     };
     write_json(&path, &c)?;
     rebuild(results_dir)
-}
-
-/// The controls of a task on the test seeds: the scripted expert (`expert` episodes), the
-/// untrained weights of `arm`'s run and its last checkpoint with its cameras frozen (`n`
-/// each), and the simulator that scored them; none until the run has its step-0 and a later
-/// checkpoint.
-fn score_controls(
-    rig: &Rig,
-    task_dir: &Path,
-    arm: &str,
-    expert: u64,
-    n: u64,
-    plan: &EvalPlan,
-) -> Result<Option<(Controls, BTreeMap<String, String>)>> {
-    let ckpts = evaluate::checkpoints(&task_dir.join(arm))?;
-    let (Some((0, untrained)), Some((_, last))) = (ckpts.first(), ckpts.last()) else {
-        return Ok(None);
-    };
-    let expert = evaluate::expert(task_dir, rig, Split::Test, expert, plan)?;
-    let untrained = evaluate::checkpoint(untrained, Some(rig), Kind::Policy, Split::Test, n, plan)?;
-    let frozen = evaluate::checkpoint(last, Some(rig), Kind::Frozen, Split::Test, n, plan)?;
-    let simulator = audit::simulator(&frozen);
-    Ok(Some((
-        Controls {
-            untrained: Some(EvalFigures::of(&untrained)),
-            frozen_cameras: Some(EvalFigures::of(&frozen)),
-            scripted_expert: Some(EvalFigures::of(&expert)),
-        },
-        simulator,
-    )))
 }
 
 /// The command line that reproduces one (task, arm).

@@ -3,7 +3,7 @@
 //! seed, and averages seeds before tasks.
 
 use super::cells::{marked, Level};
-use super::TaskResult;
+use super::files::TaskResult;
 use crate::significance::{seed_suffix, Pairing, RECIPE};
 
 /// Every result of (task, arm), one per training seed, the lowest seed first.

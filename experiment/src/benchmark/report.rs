@@ -10,8 +10,8 @@ use anyhow::{bail, Context, Result};
 
 use super::cells::{behaviour, level_of, marked, Level};
 use super::chart::{level_means, plot};
+use super::files::{TaskControls, TaskResult};
 use super::replicates::{cell, pairings, replicates};
-use super::{TaskControls, TaskResult};
 use crate::arms::ARMS;
 use crate::figures::EvalFigures;
 use crate::significance::{self, seed_suffix};

@@ -11,23 +11,15 @@ use anyhow::{bail, Context, Result};
 use scaledp_deploy::Split;
 use scaledp_schema::Rig;
 use serde::de::DeserializeOwned;
-use serde::{Deserialize, Serialize};
 
-use super::{rebuild, result_path, run_dir, score_controls, TaskControls, TaskResult};
-use crate::audit::{self, Audit, Binary};
+use super::files::{result_path, run_dir, Earlier, TaskControls, TaskResult};
+use super::report::rebuild;
+use super::scoring::score_controls;
+use crate::audit::{self, Binary};
 use crate::evaluate::{self, EvalPlan, Kind};
 use crate::figures::{Controls, EvalFigures};
 use crate::provenance::write_json;
 use crate::{Benchmark, CompareArgs, Settings};
-
-/// What a result file said before a re-score.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Earlier<T> {
-    /// The figures then.
-    pub figures: T,
-    /// Who scored them, with what simulator.
-    pub audit: Audit,
-}
 
 /// Scores the finished results of `a`'s tasks and arms again.
 pub(super) fn run(
