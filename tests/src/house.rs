@@ -56,6 +56,10 @@ fn main_path_text(text: &str) -> String {
     let mut out = String::new();
     let mut skip_test_item = false;
     let mut depth = 0i64;
+    // Inline `mod name { … }` blocks: the brace depth each opened at. Inside one, `super::`
+    // is this file's own module.
+    let mut inline: Vec<i64> = Vec::new();
+    let mut nesting = 0i64;
     for line in text.lines() {
         let code = line.split("//").next().unwrap_or("");
         if line.trim_start().starts_with("#[cfg(test)]") {
@@ -71,7 +75,24 @@ fn main_path_text(text: &str) -> String {
             }
             continue;
         }
-        out.push_str(code);
+        let t = code.trim_start();
+        let t = t
+            .strip_prefix("pub(crate) ")
+            .or_else(|| t.strip_prefix("pub "))
+            .unwrap_or(t);
+        if t.starts_with("mod ") && t.trim_end().ends_with('{') {
+            inline.push(nesting);
+        }
+        nesting += code.matches('{').count() as i64 - code.matches('}').count() as i64;
+        let line = if inline.is_empty() {
+            code.to_string()
+        } else {
+            code.replacen("super::", "self::", 1)
+        };
+        while inline.last().is_some_and(|d| nesting <= *d) {
+            inline.pop();
+        }
+        out.push_str(&line);
         out.push('\n');
     }
     out
@@ -273,7 +294,11 @@ fn graph(known: &BTreeMap<String, PathBuf>) -> BTreeMap<String, BTreeSet<String>
             } else {
                 m.split("::").map(String::from).collect()
             };
-            let inline = if INLINE_PATHS { code_paths(&f.code) } else { Vec::new() };
+            let inline = if INLINE_PATHS {
+                code_paths(&f.code)
+            } else {
+                Vec::new()
+            };
             let refs = f
                 .uses
                 .iter()
@@ -342,7 +367,8 @@ fn crates(root: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// Each circle of imports between the files of a crate's main path, as `crate: a ↔ b ↔ c`.
+/// Each circle of imports between the files of a crate's main path, as `crate: a ↔ b ↔ c`,
+/// with the imports that make it (`a → b`).
 pub fn import_circles(root: &Path) -> Vec<String> {
     let mut out = Vec::new();
     for krate in crates(root) {
@@ -350,18 +376,32 @@ pub fn import_circles(root: &Path) -> Vec<String> {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
-        for group in circles(&krate.join("src")) {
-            let files: Vec<String> = group
+        let src = krate.join("src");
+        let g = graph(&modules(&src));
+        let file = |m: &str| {
+            if m.is_empty() {
+                "lib".to_string()
+            } else {
+                m.replace("::", "/")
+            }
+        };
+        for group in circles(&src) {
+            let files: Vec<String> = group.iter().map(|m| file(m)).collect();
+            let edges: Vec<String> = group
                 .iter()
-                .map(|m| {
-                    if m.is_empty() {
-                        "lib".to_string()
-                    } else {
-                        m.replace("::", "/")
-                    }
+                .flat_map(|a| {
+                    g.get(a)
+                        .into_iter()
+                        .flatten()
+                        .filter(|b| group.contains(b))
+                        .map(move |b| format!("{} → {}", file(a), file(b)))
                 })
                 .collect();
-            out.push(format!("{name}: {}", files.join(" ↔ ")));
+            out.push(format!(
+                "{name}: {} ({})",
+                files.join(" ↔ "),
+                edges.join(", ")
+            ));
         }
     }
     out

@@ -255,7 +255,7 @@ impl Engine {
                 phases.encode_s += (t1 - t0).as_secs_f64();
                 phases.denoise_s += (t2 - t1).as_secs_f64();
                 let dcond = match c.arch {
-                    Architecture::ScaleDp => denoiser::backward(
+                    Architecture::ScaleDp => denoiser::backward::backward(
                         &sh,
                         &wv,
                         &self.cond,
@@ -264,9 +264,14 @@ impl Engine {
                         &mut self.denoiser,
                         &mut grads,
                     )?,
-                    Architecture::DpT => {
-                        dpt::backward(&ds, &wv, &self.cond, &dout, &mut self.dpt, &mut grads)?
-                    }
+                    Architecture::DpT => dpt::backward::backward(
+                        &ds,
+                        &wv,
+                        &self.cond,
+                        &dout,
+                        &mut self.dpt,
+                        &mut grads,
+                    )?,
                 };
                 self.encode_backward(model, &wv, &dcond, &mut grads)?;
                 phases.backward_s += t2.elapsed().as_secs_f64();

@@ -10,6 +10,7 @@ mod loss;
 pub(crate) mod optim;
 mod options;
 mod presets;
+mod spec;
 mod validate;
 
 use std::io::Write;
@@ -30,11 +31,11 @@ use crate::model::params::Param;
 use crate::model::ScaleDp;
 use crate::scheduler::NoiseScheduler;
 pub(crate) use loss::{candle_loss_and_grads, loss_and_grads};
-pub use loss::{LossSpec, Phases};
 use optim::AdamW;
 pub use optim::{AdamWConfig, EmaConfig};
 pub use options::{cosine_lr, StateNorm, TrainOptions};
 pub use presets::PRESETS;
+pub use spec::{LossSpec, Phases};
 pub use validate::ValRecord;
 
 /// What one optimizer step did (one line of `metrics.jsonl`).

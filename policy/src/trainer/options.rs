@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::config::{Architecture, Attention, ImageRange, ModelSize, PosEmbed, DPT_DIMS};
-use crate::trainer::loss::LossSpec;
 use crate::trainer::optim::{AdamWConfig, EmaConfig};
+use crate::trainer::spec::LossSpec;
 
 /// How the loader normalizes the state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -9,8 +9,7 @@ use super::WeightView;
 use crate::error::Result;
 use crate::model::denoiser::FREQ_DIM;
 
-mod backward;
-pub(crate) use backward::backward;
+pub(crate) mod backward;
 
 /// LayerNorm epsilon (DiT's).
 const LN_EPS: f64 = 1e-6;

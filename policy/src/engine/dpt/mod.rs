@@ -9,10 +9,8 @@
 //! computes it for all its steps at once; [`trunk`] runs the decoder layers.
 
 mod attn;
-mod backward;
+pub(crate) mod backward;
 pub(crate) mod rows;
-
-pub(crate) use backward::backward;
 
 use super::ops::{self, linear};
 use super::WeightView;
