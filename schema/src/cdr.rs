@@ -69,6 +69,11 @@ impl CdrWriter {
         self.u32(u32::try_from(n).unwrap_or(u32::MAX));
     }
 
+    /// Writes the length of a sequence of structs, before its elements.
+    pub fn sequence_len(&mut self, n: usize) {
+        self.len_prefix(n);
+    }
+
     /// Writes a `string`: length including the NUL terminator, bytes, NUL.
     pub fn string(&mut self, s: &str) {
         self.len_prefix(s.len() + 1);
@@ -199,6 +204,12 @@ impl<'a> CdrReader<'a> {
     /// Reads a `float64`.
     pub fn f64(&mut self) -> Result<f64> {
         self.fixed::<8>("float64").map(f64::from_le_bytes)
+    }
+
+    /// Reads the length of a sequence of structs (e.g. `geometry_msgs/TransformStamped[]`),
+    /// checking that `count * min_elem_size` bytes can still follow.
+    pub fn sequence_len(&mut self, min_elem_size: usize) -> Result<usize> {
+        self.seq_len(min_elem_size, "sequence")
     }
 
     /// Reads a sequence length and checks that `count * min_elem_size` bytes can still follow.

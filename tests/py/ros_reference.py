@@ -19,6 +19,8 @@ TYPES = [
     "geometry_msgs/msg/Quaternion",
     "geometry_msgs/msg/Pose",
     "geometry_msgs/msg/PoseStamped",
+    "sensor_msgs/msg/CameraInfo",
+    "tf2_msgs/msg/TFMessage",
 ]
 
 Time = ts.types["builtin_interfaces/msg/Time"]
@@ -38,6 +40,26 @@ samples = {
     "pose_stamped": ("geometry_msgs/msg/PoseStamped", ts.types["geometry_msgs/msg/PoseStamped"](
         header=header, pose=ts.types["geometry_msgs/msg/Pose"](
             position=P(x=0.1, y=-0.2, z=0.3), orientation=Q(x=0.0, y=0.0, z=0.7071067811865476, w=0.7071067811865476)))),
+    "camera_info": ("sensor_msgs/msg/CameraInfo", ts.types["sensor_msgs/msg/CameraInfo"](
+        header=header, height=480, width=640, distortion_model="plumb_bob",
+        d=np.array([0.1, -0.2, 0.0, 0.001, 0.05]),
+        k=np.array([600.5, 0.0, 320.0, 0.0, 600.5, 240.0, 0.0, 0.0, 1.0]),
+        r=np.array([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        p=np.array([600.5, 0.0, 320.0, 0.0, 0.0, 600.5, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
+        binning_x=2, binning_y=0,
+        roi=ts.types["sensor_msgs/msg/RegionOfInterest"](x_offset=1, y_offset=2, height=3, width=4, do_rectify=True))),
+    "tf": ("tf2_msgs/msg/TFMessage", ts.types["tf2_msgs/msg/TFMessage"](transforms=[
+        ts.types["geometry_msgs/msg/TransformStamped"](
+            header=header, child_frame_id="fr3_link0",
+            transform=ts.types["geometry_msgs/msg/Transform"](
+                translation=ts.types["geometry_msgs/msg/Vector3"](x=0.25, y=-0.5, z=2.0),
+                rotation=Q(x=0.0, y=0.0, z=0.7071067811865476, w=0.7071067811865476))),
+        ts.types["geometry_msgs/msg/TransformStamped"](
+            header=Header(stamp=Time(sec=1, nanosec=2), frame_id=""), child_frame_id="cam",
+            transform=ts.types["geometry_msgs/msg/Transform"](
+                translation=ts.types["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                rotation=Q(x=0.0, y=0.0, z=0.0, w=1.0))),
+    ])),
 }
 
 out = {

@@ -3,7 +3,8 @@
 #![allow(clippy::unwrap_used)] // test code: a panic is the failure report
 
 use scaledp_schema::msg::{
-    CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion, Time,
+    CameraInfo, CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion,
+    RegionOfInterest, TfMessage, Time, Transform, TransformStamped, Vector3,
 };
 use scaledp_schema::{CdrWriter, RosMessage};
 use scaledp_tests::run_python;
@@ -58,7 +59,7 @@ fn check<M: RosMessage + PartialEq + std::fmt::Debug>(
 fn definitions_and_cdr_match_rosbags() {
     let reference = run_python("ros_reference.py", &[]);
     let defs = reference["definitions"].as_object().unwrap();
-    assert_eq!(defs.len(), 9);
+    assert_eq!(defs.len(), 11);
     for (type_name, text) in defs {
         let ours = scaledp_schema::msg::definition(type_name)
             .unwrap_or_else(|| panic!("no definition of {type_name}"));
@@ -121,6 +122,50 @@ fn definitions_and_cdr_match_rosbags() {
                     w: h,
                 },
             },
+        },
+    );
+    let mut info = CameraInfo::pinhole(header(), 640, 480, 600.5, 320.0, 240.0);
+    info.d = vec![0.1, -0.2, 0.0, 0.001, 0.05];
+    info.binning_x = 2;
+    info.roi = RegionOfInterest {
+        x_offset: 1,
+        y_offset: 2,
+        height: 3,
+        width: 4,
+        do_rectify: true,
+    };
+    check(&reference, "camera_info", info);
+    check(
+        &reference,
+        "tf",
+        TfMessage {
+            transforms: vec![
+                TransformStamped {
+                    header: header(),
+                    child_frame_id: "fr3_link0".into(),
+                    transform: Transform {
+                        translation: Vector3 {
+                            x: 0.25,
+                            y: -0.5,
+                            z: 2.0,
+                        },
+                        rotation: Quaternion {
+                            x: 0.0,
+                            y: 0.0,
+                            z: h,
+                            w: h,
+                        },
+                    },
+                },
+                TransformStamped {
+                    header: Header {
+                        stamp: Time { sec: 1, nanosec: 2 },
+                        frame_id: String::new(),
+                    },
+                    child_frame_id: "cam".into(),
+                    transform: Transform::default(),
+                },
+            ],
         },
     );
 }
