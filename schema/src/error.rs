@@ -21,6 +21,16 @@ pub enum Error {
         /// What is wrong.
         reason: String,
     },
+    /// A topic remapping (`FROM:=TO`) does not fit the rig.
+    #[error("remap {from}:={to}: {reason}")]
+    Remap {
+        /// The rig's topic.
+        from: String,
+        /// Its new name.
+        to: String,
+        /// What is wrong.
+        reason: String,
+    },
     /// A kinematic computation got input it cannot use.
     #[error("kinematics: {0}")]
     Kinematics(String),

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 mod camera;
+mod remap;
 mod topics;
 
 pub use crate::benchmarks::{Simulator, SimulatorKind};
@@ -200,6 +201,10 @@ const BUILTIN: &[(&str, &str)] = &[
         "bimanual_ur5_3rs",
         include_str!("../../rigs/bimanual_ur5_3rs.toml"),
     ),
+    (
+        "franka_2zed_v4",
+        include_str!("../../rigs/franka_2zed_v4.toml"),
+    ),
     ("franka_sim", include_str!("../../rigs/franka_sim.toml")),
     (
         "bimanual_ur5_sim",
@@ -233,8 +238,9 @@ impl Rig {
         Ok(rig)
     }
 
-    /// The rigs shipped in `rigs/`, by name: `franka_2zed`, `bimanual_ur5_3rs`, and their
-    /// simulated task cells with command topics and smaller images, `franka_sim` and
+    /// The rigs shipped in `rigs/`, by name: `franka_2zed` (ZED wrapper v5 topics),
+    /// `franka_2zed_v4` (ZED wrapper v4 topics), `bimanual_ur5_3rs` (realsense2_camera 4.x),
+    /// each with registered depth, `camera_info` and `[tf]`, and their simulated task cells with command topics and smaller images, `franka_sim` and
     /// `bimanual_ur5_sim`; and the simulation benchmarks' `metaworld/<task>` and `aloha/<task>`.
     pub fn builtin(name: &str) -> Option<Self> {
         if let Some(rig) = crate::benchmarks::builtin(name) {

@@ -40,7 +40,7 @@ enum Source {
 }
 
 fn sources(rig: &Rig) -> Result<Vec<Source>> {
-    rig.topics()
+    rig.training_topics()
         .iter()
         .map(|t| {
             if let Some(i) = rig.cameras.iter().position(|c| c.topic == t.topic) {
@@ -74,7 +74,8 @@ type Pending = Reverse<(u64, usize, u64, u64, Vec<u8>)>;
 
 /// Writes one episode of `seconds` of `rig` under `seed` to `path` (an `episode_*.mcap` like
 /// the recorder's, with `scaledp.episode` metadata naming `task`), starting at `start_ns`.
-/// The rig's command topics, if any, carry the operator's leader samples. The episode is
+/// The rig's command topics, if any, carry the operator's leader samples; what a rig records
+/// beside its training streams (depth, `camera_info`, `/tf`) is left out. The episode is
 /// labelled by the task's scorer when the operator finished within `seconds` (success or
 /// failure), else left unlabeled. Returns how the task went.
 pub fn write_episode(
@@ -88,7 +89,8 @@ pub fn write_episode(
 ) -> Result<EpisodeResult> {
     let scene = Arc::new(Scene::new(rig));
     let mut run = OfflineRun::new(scene.clone(), seed);
-    let topics = rig.topics();
+    // The training streams only: depth, camera_info and tf come from the live simulator.
+    let topics = rig.training_topics();
     let sources = sources(rig)?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // Captures (stamp, topic, k, latency) of every non-command topic, in stamp order.

@@ -14,6 +14,87 @@ fn shipped_rigs_parse() {
     let ur = Rig::builtin("bimanual_ur5_3rs").unwrap();
     assert_eq!((ur.arms.len(), ur.cameras.len()), (2, 3));
     assert_eq!(ur.cameras[0].encoding(), "rgb8");
+    assert!(Rig::builtin_names().any(|n| n == "franka_2zed_v4"));
+}
+
+/// The real rigs record what their drivers publish beside colour, under the drivers' own
+/// names: realsense2_camera 4.x, the ZED wrapper v5 and v4.
+#[test]
+fn shipped_real_rigs_match_the_drivers_names() {
+    let line = |rig: &str| -> Vec<(String, TopicKind, String)> {
+        let rig = Rig::builtin(rig).unwrap();
+        let beside = rig.recorded_beside();
+        beside
+            .into_iter()
+            .filter(|t| t.owner == rig.cameras[0].name || t.owner.is_empty())
+            .map(|t| {
+                let encoding = match t.kind {
+                    TopicKind::Depth => rig.cameras[0].depth.as_ref().unwrap().encoding.as_str(),
+                    _ => "",
+                };
+                (t.topic, t.kind, encoding.to_string())
+            })
+            .collect()
+    };
+    let k = |t: &str, kind, e: &str| (t.to_string(), kind, e.to_string());
+    let tf = [
+        k("/tf", TopicKind::Tf, ""),
+        k("/tf_static", TopicKind::TfStatic, ""),
+    ];
+    let rs = "/cam_high/camera/";
+    assert_eq!(
+        line("bimanual_ur5_3rs"),
+        [
+            k(
+                &format!("{rs}aligned_depth_to_color/image_raw"),
+                TopicKind::Depth,
+                "16UC1"
+            ),
+            k(&format!("{rs}color/camera_info"), TopicKind::CameraInfo, ""),
+            k(
+                &format!("{rs}aligned_depth_to_color/camera_info"),
+                TopicKind::CameraInfo,
+                ""
+            ),
+        ]
+        .into_iter()
+        .chain(tf.clone())
+        .collect::<Vec<_>>()
+    );
+    let zed = "/zed_front/zed_node/";
+    for (rig, color, info) in [
+        (
+            "franka_2zed",
+            "rgb/color/rect/image",
+            "rgb/color/rect/camera_info",
+        ),
+        ("franka_2zed_v4", "rgb/image_rect_color", "rgb/camera_info"),
+    ] {
+        assert_eq!(
+            Rig::builtin(rig).unwrap().cameras[0].topic,
+            format!("{zed}{color}")
+        );
+        assert_eq!(
+            line(rig),
+            [
+                k(
+                    &format!("{zed}depth/depth_registered"),
+                    TopicKind::Depth,
+                    "32FC1"
+                ),
+                k(&format!("{zed}{info}"), TopicKind::CameraInfo, ""),
+                k(
+                    &format!("{zed}depth/camera_info"),
+                    TopicKind::CameraInfo,
+                    ""
+                ),
+            ]
+            .into_iter()
+            .chain(tf.clone())
+            .collect::<Vec<_>>(),
+            "{rig}"
+        );
+    }
 }
 
 #[test]
@@ -78,17 +159,19 @@ fn errors_name_the_file_and_the_problem() {
 #[test]
 fn command_topics_come_last_with_their_types() {
     // The real rigs know no command topics; their simulated cells add one per arm and
-    // gripper, after every state topic, so existing topic indices keep their meaning.
+    // gripper, after every state topic, so existing topic indices keep their meaning. The real
+    // rigs' training streams (what comes before depth, camera_info and tf) are the cells'.
     for (real, sim) in [
         ("franka_2zed", "franka_sim"),
         ("bimanual_ur5_3rs", "bimanual_ur5_sim"),
     ] {
         let (real, sim) = (Rig::builtin(real).unwrap(), Rig::builtin(sim).unwrap());
         assert!(real.command_topics().is_empty());
-        let n = real.topics().len();
+        assert!(sim.recorded_beside().is_empty(), "{}", sim.name);
+        let n = real.topics().len() - real.recorded_beside().len();
         let topics = sim.topics();
         assert_eq!(topics.len(), n + 2 * sim.arms.len());
-        for (a, b) in real.topics().iter().zip(&topics) {
+        for (a, b) in real.topics().iter().zip(&topics).take(n) {
             assert_eq!((&a.topic, &a.message_type), (&b.topic, &b.message_type));
         }
         assert_eq!(&topics[n..], sim.command_topics().as_slice());
@@ -144,7 +227,8 @@ fn gripper_width_round_trips() {
 /// owner and whether it is latched.
 #[test]
 fn what_is_recorded_beside_the_training_streams() {
-    let base = include_str!("../../../rigs/bimanual_ur5_3rs.toml");
+    // The simulated cell (the shipped real rig already lists all of these).
+    let base = include_str!("../../../rigs/bimanual_ur5_sim.toml");
     let n = Rig::parse(base, Path::new("base.toml"))
         .unwrap()
         .topics()

@@ -96,10 +96,48 @@ pub struct TfTopics {
     /// publishes at the joint states' rate, a driver at its own).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rate_hz: Option<f64>,
+    /// The dynamic topic's name (default `/tf`; a namespaced robot's `/<ns>/tf`).
+    #[serde(default = "tf_topic", skip_serializing_if = "is_tf_topic")]
+    pub topic: String,
+    /// The latched topic's name (default `/tf_static`).
+    #[serde(
+        default = "tf_static_topic",
+        skip_serializing_if = "is_tf_static_topic"
+    )]
+    pub static_topic: String,
+}
+
+impl Default for TfTopics {
+    /// Both `/tf` and `/tf_static`, no rate.
+    fn default() -> Self {
+        Self {
+            dynamic: true,
+            static_: true,
+            rate_hz: None,
+            topic: tf_topic(),
+            static_topic: tf_static_topic(),
+        }
+    }
 }
 
 fn yes() -> bool {
     true
+}
+
+fn tf_topic() -> String {
+    "/tf".into()
+}
+
+fn tf_static_topic() -> String {
+    "/tf_static".into()
+}
+
+fn is_tf_topic(t: &str) -> bool {
+    t == "/tf"
+}
+
+fn is_tf_static_topic(t: &str) -> bool {
+    t == "/tf_static"
 }
 
 /// `tf2_msgs/msg/TFMessage`.
@@ -143,6 +181,14 @@ impl Rig {
         out.extend(self.command_topics());
         out.extend(self.recorded_beside());
         out
+    }
+
+    /// The head of [`Self::topics`] without what is recorded beside it: colour images, joint
+    /// and gripper states, command topics (what training data is made of, in that order).
+    pub fn training_topics(&self) -> Vec<TopicSpec> {
+        let mut all = self.topics();
+        all.truncate(all.len() - self.recorded_beside().len());
+        all
     }
 
     /// The command topics alone: per arm, its `command_topic` and its gripper's
@@ -203,11 +249,17 @@ impl Rig {
         if let Some(tf) = &self.tf {
             if tf.dynamic {
                 let rate = tf.rate_hz.unwrap_or(0.0);
-                out.push(TopicSpec::new("/tf", TF_MESSAGE, rate, TopicKind::Tf, ""));
+                out.push(TopicSpec::new(
+                    &tf.topic,
+                    TF_MESSAGE,
+                    rate,
+                    TopicKind::Tf,
+                    "",
+                ));
             }
             if tf.static_ {
                 out.push(TopicSpec::new(
-                    "/tf_static",
+                    &tf.static_topic,
                     TF_MESSAGE,
                     0.0,
                     TopicKind::TfStatic,
