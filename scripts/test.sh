@@ -17,6 +17,11 @@ step() {
 }
 report() {
   local rc=$?
+  # A failed step leaves no venv install running behind it.
+  if [ -n "${venvs_pid:-}" ] && kill -0 "$venvs_pid" 2>/dev/null; then
+    pkill -P "$venvs_pid" 2>/dev/null || true
+    kill "$venvs_pid" 2>/dev/null || true
+  fi
   echo
   echo "== scripts/test.sh timings =="
   printf '%s\n' "${steps[@]}"
@@ -30,19 +35,27 @@ trap report EXIT
 free_disk() { df -Ph . | awk 'NR == 2 {print $4 " free on " $6}'; }
 echo "scripts/test.sh: $(free_disk) at the start"
 
-bash scripts/setup-python.sh
-step "python peers (.venv)"
-
-# LeRobot 0.4.4 and torch (several GB from PyPI, kept in .venv-bench between runs): the video
-# conformance tests read what LeRobot itself writes and returns, and the PyTorch route's tests
-# (tests/tests/torch_route) train with this torch: one copy of it for both.
-bash scripts/setup-bench-python.sh
-step "lerobot (.venv-bench)"
-
-# MetaWorld 3.1 and gym-aloha on MuJoCo 3.3 (.venv-sims): the simulation benchmarks' bridges,
-# their kinematics tests and the MetaWorld end-to-end test.
-bash scripts/setup-sims.sh
-step "simulators (.venv-sims)"
+# The Python peers (.venv), LeRobot 0.4.4 with torch (.venv-bench: several GB from PyPI, kept
+# between runs; the video conformance tests read what LeRobot itself writes, and the PyTorch
+# route's tests train with this torch) and MetaWorld 3.1 + gym-aloha on MuJoCo 3.3 (.venv-sims:
+# the simulation benchmarks' bridges). Mostly downloads and unpacking: they run beside the
+# release build, which is all CPU, and the tests wait for them.
+mkdir -p target
+venvs_log=target/test-venvs.log
+venvs_start=$(date +%s)
+( bash scripts/setup-python.sh && bash scripts/setup-bench-python.sh && bash scripts/setup-sims.sh
+  echo "venvs done after $(( $(date +%s) - venvs_start )) s" ) > "$venvs_log" 2>&1 &
+venvs_pid=$!
+wait_venvs() {
+  if ! wait "$venvs_pid"; then
+    echo "setting up the Python venvs failed (their log, $venvs_log):"
+    cat "$venvs_log"
+    exit 1
+  fi
+  steps+=("$(printf '%-28s %4d s' "  (venvs, beside the build)" "$(sed -n 's/^venvs done after \([0-9]*\) s$/\1/p' "$venvs_log")")")
+  grep -v '^venvs done' "$venvs_log" | sed 's/^/  /'
+}
+step "venvs started"
 
 cargo fmt --all -- --check
 step "cargo fmt --check"
@@ -57,6 +70,9 @@ step "cargo build --release"
 # Check mode in the release profile: build scripts and proc-macros are the ones just built.
 cargo clippy --release --workspace --all-targets --locked -- -D warnings
 step "cargo clippy -D warnings"
+
+wait_venvs
+step "waiting for the venvs"
 
 bash scripts/build-python.sh   # the scaledp_data wheel, reusing that build
 step "scaledp_data wheel"
