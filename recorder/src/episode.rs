@@ -37,6 +37,42 @@ impl std::str::FromStr for Compression {
 /// state publishers offer); readers such as `ros2 bag play` use it to re-publish.
 pub const OFFERED_QOS_YAML: &str = "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n";
 
+/// QoS rosbag2 records for a transient-local ("latched") publisher such as tf2's
+/// `/tf_static`: reliable, transient local, so `ros2 bag play` re-publishes it latched.
+pub const OFFERED_QOS_LATCHED_YAML: &str = "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n";
+
+/// One channel of an episode file: a topic, its type and the `ros2msg` schema text written for
+/// it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelSpec {
+    /// ROS 2 topic.
+    pub topic: String,
+    /// Full ROS 2 type; `None` when nobody could tell (a schemaless channel).
+    pub message_type: Option<String>,
+    /// The schema text; empty when the type's definition was found nowhere (readers that need
+    /// it cannot decode the channel, the bytes are kept all the same).
+    pub definition: String,
+    /// Transient-local: its `offered_qos_profiles` say so.
+    pub latched: bool,
+}
+
+impl ChannelSpec {
+    /// A rig topic whose type scaledp knows; [`Error::UnknownType`] otherwise.
+    pub fn known(t: &TopicSpec) -> Result<Self> {
+        let definition =
+            scaledp_schema::msg::definition(&t.message_type).ok_or_else(|| Error::UnknownType {
+                topic: t.topic.clone(),
+                message_type: t.message_type.clone(),
+            })?;
+        Ok(Self {
+            topic: t.topic.clone(),
+            message_type: Some(t.message_type.clone()),
+            definition,
+            latched: t.latched,
+        })
+    }
+}
+
 /// Options of an episode file. Defaults: LZ4 chunks of 8 MiB.
 #[derive(Debug, Clone)]
 pub struct EpisodeOptions {
@@ -71,10 +107,26 @@ impl EpisodeOptions {
 
     /// Creates `<path>.partial` with the header, schemas, channels and `start_metadata`
     /// (written as the `scaledp.episode.start` metadata record, so a crashed episode keeps it).
+    /// Every topic's type must be one scaledp knows ([`Error::UnknownType`] names the first
+    /// that is not); [`Self::create_channels`] takes schemas found elsewhere.
     pub fn create(
         &self,
         path: &Path,
         topics: &[TopicSpec],
+        start_metadata: BTreeMap<String, String>,
+    ) -> Result<EpisodeWriter> {
+        let channels = topics
+            .iter()
+            .map(ChannelSpec::known)
+            .collect::<Result<Vec<_>>>()?;
+        self.create_channels(path, &channels, start_metadata)
+    }
+
+    /// [`Self::create`] with each channel's schema given.
+    pub fn create_channels(
+        &self,
+        path: &Path,
+        topics: &[ChannelSpec],
         start_metadata: BTreeMap<String, String>,
     ) -> Result<EpisodeWriter> {
         let partial = partial_path(path);
@@ -92,7 +144,7 @@ impl EpisodeOptions {
         path: &Path,
         partial: PathBuf,
         file: File,
-        topics: &[TopicSpec],
+        topics: &[ChannelSpec],
         start_metadata: BTreeMap<String, String>,
     ) -> Result<EpisodeWriter> {
         let compression = match self.compression {
@@ -110,23 +162,7 @@ impl EpisodeOptions {
             .map_err(Error::mcap(&partial))?;
         let mut channel_ids = Vec::with_capacity(topics.len());
         for t in topics {
-            let definition = scaledp_schema::msg::definition(&t.message_type).ok_or_else(|| {
-                Error::UnknownType {
-                    topic: t.topic.clone(),
-                    message_type: t.message_type.clone(),
-                }
-            })?;
-            let schema = writer
-                .add_schema(&t.message_type, "ros2msg", definition.as_bytes())
-                .map_err(Error::mcap(&partial))?;
-            let meta = BTreeMap::from([(
-                "offered_qos_profiles".to_string(),
-                OFFERED_QOS_YAML.to_string(),
-            )]);
-            let id = writer
-                .add_channel(schema, &t.topic, "cdr", &meta)
-                .map_err(Error::mcap(&partial))?;
-            channel_ids.push(id);
+            channel_ids.push(add_channel(&mut writer, t, &partial)?);
         }
         writer
             .write_metadata(&mcap::records::Metadata {
@@ -145,6 +181,29 @@ impl EpisodeOptions {
             topics: topics.iter().map(|t| t.topic.clone()).collect(),
         })
     }
+}
+
+/// Adds `t`'s schema (none when its type is unknown) and channel.
+fn add_channel(
+    writer: &mut mcap::Writer<BufWriter<File>>,
+    t: &ChannelSpec,
+    partial: &Path,
+) -> Result<u16> {
+    let schema = match &t.message_type {
+        Some(ty) => writer
+            .add_schema(ty, "ros2msg", t.definition.as_bytes())
+            .map_err(Error::mcap(partial))?,
+        None => 0,
+    };
+    let qos = if t.latched {
+        OFFERED_QOS_LATCHED_YAML
+    } else {
+        OFFERED_QOS_YAML
+    };
+    let meta = BTreeMap::from([("offered_qos_profiles".to_string(), qos.to_string())]);
+    writer
+        .add_channel(schema, &t.topic, "cdr", &meta)
+        .map_err(Error::mcap(partial))
 }
 
 /// `episode_000001.mcap` → `episode_000001.mcap.partial`.
@@ -180,6 +239,18 @@ impl EpisodeWriter {
     /// The `.partial` file being written.
     pub fn partial_path(&self) -> &Path {
         &self.partial
+    }
+
+    /// Adds a channel to the open file (a topic first seen mid-episode); returns its topic
+    /// number for [`Self::write`].
+    pub fn add_channel(&mut self, t: &ChannelSpec) -> Result<usize> {
+        let w = self.writer.as_mut().ok_or(Error::Stopped)?;
+        let id = add_channel(w, t, &self.partial)?;
+        self.channel_ids.push(id);
+        self.messages.push(0);
+        self.bytes.push(0);
+        self.topics.push(t.topic.clone());
+        Ok(self.channel_ids.len() - 1)
     }
 
     /// Appends one message of topic number `topic` (index into the `topics` given to `create`).

@@ -42,6 +42,57 @@ pub fn rmw_key(domain: u32, topic: &str, message_type: &str, type_hash: &str) ->
     )
 }
 
+/// The ROS 2 type of an rmw_zenoh key's type segment: `sensor_msgs::msg::dds_::Image_` →
+/// `sensor_msgs/msg/Image`; `None` for anything else.
+pub fn type_from_rmw(segment: &str) -> Option<String> {
+    let (head, name) = segment.rsplit_once("::dds_::")?;
+    let name = name.strip_suffix('_')?;
+    let mut parts: Vec<&str> = head.split("::").collect();
+    parts.push(name);
+    (parts.len() == 3 && parts.iter().all(|p| !p.is_empty())).then(|| parts.join("/"))
+}
+
+/// Topic and type of an rmw_zenoh data key (`<domain>/<topic>/<type>/<hash>`); `None` when the
+/// key is not one.
+pub fn parse_rmw_key(key: &str) -> Option<(String, String)> {
+    let segments: Vec<&str> = key.split('/').collect();
+    let [domain, topic @ .., ty, _hash] = segments.as_slice() else {
+        return None;
+    };
+    if topic.is_empty() || domain.is_empty() || !domain.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some((format!("/{}", topic.join("/")), type_from_rmw(ty)?))
+}
+
+/// The topic a zenoh-bridge-ros2dds key stands for (the bridge's namespace removed); `None`
+/// for keys outside the namespace and for rmw_zenoh keys.
+pub fn topic_from_bridge_key(namespace: &str, key: &str) -> Option<String> {
+    if parse_rmw_key(key).is_some() {
+        return None;
+    }
+    let ns = namespace.trim_matches('/');
+    let rest = if ns.is_empty() {
+        key
+    } else {
+        key.strip_prefix(ns)?.strip_prefix('/')?
+    };
+    (!rest.is_empty() && !rest.starts_with('@')).then(|| format!("/{rest}"))
+}
+
+/// Where zenoh-bridge-ros2dds up to 1.5.0 serves the transient-local publications of `key`
+/// from its cache (a `PublicationCache` queryable per bridge: `<key>/@ros2_pub_cache/<zid>`),
+/// with `*` for the bridge's id: a query here reaches every bridge's cache. Replies carry the
+/// publications' own key, so the query must accept any key.
+pub fn bridge_cache_selector(key: &str) -> String {
+    format!("{key}/@ros2_pub_cache/*")
+}
+
+/// The queryable a bridge with id `zid` declares for `key`'s cache (the simulator's).
+pub fn bridge_cache_queryable(key: &str, zid: &str) -> String {
+    format!("{key}/@ros2_pub_cache/{zid}")
+}
+
 /// What rmw_zenoh attaches to each sample (zenoh-ext serialization, keys as strings).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RmwAttachment {
@@ -110,6 +161,60 @@ mod tests {
         assert_eq!(
             rmw_key_expr("/franka/joint_states", "sensor_msgs/msg/JointState"),
             "*/franka/joint_states/sensor_msgs::msg::dds_::JointState_/*"
+        );
+    }
+
+    #[test]
+    fn keys_name_their_topic_and_type() {
+        assert_eq!(
+            parse_rmw_key(
+                "0/zed/zed_node/depth/depth_registered/sensor_msgs::msg::dds_::Image_/RIHS01_ab"
+            ),
+            Some((
+                "/zed/zed_node/depth/depth_registered".to_string(),
+                "sensor_msgs/msg/Image".to_string()
+            ))
+        );
+        assert_eq!(
+            parse_rmw_key(&rmw_key(
+                7,
+                "/tf_static",
+                "tf2_msgs/msg/TFMessage",
+                "TypeHashNotSupported"
+            )),
+            Some((
+                "/tf_static".to_string(),
+                "tf2_msgs/msg/TFMessage".to_string()
+            ))
+        );
+        for not_rmw in [
+            "tf_static",
+            "x/tf/tf2_msgs::msg::dds_::TFMessage_/h",
+            "0/a/b/c",
+            "0/T_/h",
+        ] {
+            assert_eq!(parse_rmw_key(not_rmw), None, "{not_rmw}");
+        }
+        assert_eq!(
+            type_from_rmw("sensor_msgs::msg::dds_::CameraInfo_").as_deref(),
+            Some("sensor_msgs/msg/CameraInfo")
+        );
+        assert_eq!(
+            topic_from_bridge_key("", "tf_static").as_deref(),
+            Some("/tf_static")
+        );
+        assert_eq!(
+            topic_from_bridge_key("/robot1", "robot1/tf").as_deref(),
+            Some("/tf")
+        );
+        assert_eq!(topic_from_bridge_key("robot1", "robot2/tf"), None);
+        assert_eq!(
+            topic_from_bridge_key("", "0/tf/tf2_msgs::msg::dds_::TFMessage_/h"),
+            None
+        );
+        assert_eq!(
+            bridge_cache_selector("tf_static"),
+            "tf_static/@ros2_pub_cache/*"
         );
     }
 

@@ -25,6 +25,10 @@ pub fn zenoh_config(
             c.insert_json5("mode", r#""peer""#).map_err(zerr)?;
             c.insert_json5("scouting/multicast/enabled", "false")
                 .map_err(zerr)?;
+            // Timestamps on what this session publishes, as rmw_zenoh configures its sessions:
+            // a zenoh-ext publisher with a cache (a latched topic) needs them.
+            c.insert_json5("timestamping/enabled", "true")
+                .map_err(zerr)?;
             // Multi-MB images arrive in many fragments: give each link room to reassemble them.
             c.insert_json5("transport/link/rx/buffer_size", "16777216")
                 .map_err(zerr)?;

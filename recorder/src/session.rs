@@ -3,176 +3,30 @@
 //! Zenoh callbacks never block: they stamp the receive time, count, and hand the payload (a
 //! reference-counted buffer, not a copy) to the queue, or count a drop when the queue already
 //! holds `queue_bytes`. Commands travel through the same queue, so an episode holds exactly the
-//! messages received between its start and stop.
+//! messages received between its start and stop. Latched topics are queued while no episode is
+//! open too: the writer keeps their latest messages for the start of every episode.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering::Relaxed};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, RwLock};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use crossbeam_channel::{Receiver, Sender};
-use scaledp_schema::rig::{Rig, TopicSpec};
+use scaledp_schema::rig::TopicSpec;
 use zenoh::bytes::ZBytes;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
+use crate::channels::discovered;
 use crate::control::{Command, Label};
-use crate::episode::{Compression, EpisodeOptions, EpisodeSummary};
+use crate::episode::EpisodeSummary;
 use crate::error::{Error, Result};
-use crate::keys::{bridge_key, rmw_key_expr, RmwAttachment};
-use crate::writer::WriterThread;
-
-/// Settings of a recording session; `start` opens it.
-#[derive(Debug, Clone)]
-pub struct RecorderOptions {
-    pub(crate) rig: Rig,
-    pub(crate) out_dir: PathBuf,
-    pub(crate) task: String,
-    pub(crate) operator: String,
-    pub(crate) episode: EpisodeOptions,
-    pub(crate) queue_bytes: usize,
-    pub(crate) flush_interval: Duration,
-    pub(crate) control_prefix: String,
-    pub(crate) bridge_namespace: String,
-}
-
-impl RecorderOptions {
-    /// Records every topic of `rig` into `out_dir`. Defaults: LZ4 chunks of 8 MiB, a 1 GiB
-    /// queue, a flush every 500 ms, control on `scaledp/recorder/control`, no bridge namespace.
-    pub fn new(rig: Rig, out_dir: impl Into<PathBuf>) -> Self {
-        Self {
-            rig,
-            out_dir: out_dir.into(),
-            task: String::new(),
-            operator: String::new(),
-            episode: EpisodeOptions::new(),
-            queue_bytes: 1 << 30,
-            flush_interval: Duration::from_millis(500),
-            control_prefix: "scaledp/recorder".into(),
-            bridge_namespace: String::new(),
-        }
-    }
-    /// The task instruction stored with every episode, e.g. "put the cup on the plate".
-    pub fn task(mut self, task: impl Into<String>) -> Self {
-        self.task = task.into();
-        self
-    }
-    /// Who teleoperated.
-    pub fn operator(mut self, operator: impl Into<String>) -> Self {
-        self.operator = operator.into();
-        self
-    }
-    /// Chunk compression.
-    pub fn compression(mut self, c: Compression) -> Self {
-        self.episode = self.episode.compression(c);
-        self
-    }
-    /// Target chunk size (bytes).
-    pub fn chunk_size(mut self, bytes: u64) -> Self {
-        self.episode = self.episode.chunk_size(bytes);
-        self
-    }
-    /// Most payload bytes waiting for the writer before new messages are dropped (and counted).
-    pub fn queue_bytes(mut self, bytes: usize) -> Self {
-        self.queue_bytes = bytes.max(1);
-        self
-    }
-    /// How often the open chunk is closed and handed to the OS (at most 1 s).
-    pub fn flush_interval(mut self, every: Duration) -> Self {
-        self.flush_interval = every.clamp(Duration::from_millis(10), Duration::from_secs(1));
-        self
-    }
-    /// Key prefix for `<prefix>/control` (commands in) and `<prefix>/status` (events out).
-    pub fn control_prefix(mut self, prefix: impl Into<String>) -> Self {
-        self.control_prefix = prefix.into().trim_matches('/').to_string();
-        self
-    }
-    /// Namespace zenoh-bridge-ros2dds was started with (`-n`), if any.
-    pub fn bridge_namespace(mut self, ns: impl Into<String>) -> Self {
-        self.bridge_namespace = ns.into();
-        self
-    }
-
-    /// Opens a Zenoh session with `config`, subscribes to every topic of the rig (bridge and
-    /// rmw_zenoh keys) and to the control key, and starts the writer thread. No episode is
-    /// open until a [`Command::Start`].
-    pub fn start(self, config: zenoh::Config) -> Result<Recorder> {
-        std::fs::create_dir_all(&self.out_dir).map_err(Error::io(&self.out_dir))?;
-        let topics = self.rig.topics();
-        let session = crate::net::open(config)?;
-        let shared = Arc::new(Shared {
-            links: AtomicUsize::new(0),
-            recording: AtomicBool::new(false),
-            queued_bytes: AtomicUsize::new(0),
-            max_queued_bytes: self.queue_bytes,
-            counters: topics.iter().map(|_| Counters::default()).collect(),
-            last_sequence: Mutex::new(HashMap::new()),
-            active: Mutex::new(None),
-        });
-        let (tx, rx) = crossbeam_channel::unbounded();
-        let control = Control {
-            tx,
-            shared: shared.clone(),
-        };
-        let zerr = |e: zenoh::Error| Error::Zenoh(e.to_string());
-        let mut subscribers = Vec::new();
-        for (i, t) in topics.iter().enumerate() {
-            for key in [
-                bridge_key(&self.bridge_namespace, &t.topic),
-                rmw_key_expr(&t.topic, &t.message_type),
-            ] {
-                let control = control.clone();
-                let sub = session
-                    .declare_subscriber(key)
-                    .callback(move |s: Sample| control.on_sample(i, &s))
-                    .wait()
-                    .map_err(zerr)?;
-                subscribers.push(sub);
-            }
-        }
-        let c = control.clone();
-        let control_sub = session
-            .declare_subscriber(format!("{}/control", self.control_prefix))
-            .callback(move |s: Sample| {
-                let text = String::from_utf8_lossy(&s.payload().to_bytes()).into_owned();
-                match text.parse::<Command>() {
-                    Ok(cmd) => {
-                        tracing::info!(command = ?cmd, "control over zenoh");
-                        c.send(cmd);
-                    }
-                    Err(e) => tracing::warn!("{}: {e}", s.key_expr()),
-                }
-            })
-            .wait()
-            .map_err(zerr)?;
-        subscribers.push(control_sub);
-        let (events_tx, events) = crossbeam_channel::unbounded();
-        let writer = WriterThread::new(
-            self,
-            topics.clone(),
-            shared.clone(),
-            events_tx,
-            session.clone(),
-        )?;
-        let handle = std::thread::Builder::new()
-            .name("scaledp-writer".into())
-            .spawn(move || writer.run(rx))
-            .map_err(Error::io("writer thread"))?;
-        let links = LinkWatch::start(session.clone(), shared.clone())?;
-        Ok(Recorder {
-            session,
-            subscribers,
-            control,
-            shared,
-            topics,
-            events,
-            writer: Some(handle),
-            links: Some(links),
-        })
-    }
-}
+use crate::keys::RmwAttachment;
+use crate::links::LinkWatch;
+use crate::options::RecorderOptions;
+use crate::subscribe::Sub;
 
 #[derive(Default)]
 pub(crate) struct Counters {
@@ -182,65 +36,93 @@ pub(crate) struct Counters {
     pub upstream_gaps: AtomicU64,
 }
 
-/// Watches the session's links (to the bridge, a router, peers) and says when the last one is
-/// lost and when one is back: Zenoh reconnects to its `connect` endpoints by itself, but what
-/// is published meanwhile never arrives, and an operator should know.
-struct LinkWatch {
-    stop: Arc<AtomicBool>,
-    handle: JoinHandle<()>,
-}
-
-impl LinkWatch {
-    /// How often the links are counted.
-    const EVERY: Duration = Duration::from_millis(250);
-
-    fn start(session: zenoh::Session, shared: Arc<Shared>) -> Result<Self> {
-        let stop = Arc::new(AtomicBool::new(false));
-        let stopped = stop.clone();
-        let handle = std::thread::Builder::new()
-            .name("scaledp-links".into())
-            .spawn(move || {
-                // None until the first link: a recorder started before the bridge is not "down".
-                let mut up: Option<bool> = None;
-                while !stopped.load(Relaxed) {
-                    let info = session.info();
-                    let n = info.routers_zid().wait().count() + info.peers_zid().wait().count();
-                    shared.links.store(n, Relaxed);
-                    match (up, n > 0) {
-                        (Some(true), false) => tracing::warn!(
-                            "zenoh: every link is down (bridge or router gone?): reconnecting; \
-                             messages published meanwhile are lost"
-                        ),
-                        (Some(false), true) => {
-                            tracing::warn!("zenoh: link back ({n} peers and routers)")
-                        }
-                        _ => {}
-                    }
-                    if up.is_some() || n > 0 {
-                        up = Some(n > 0);
-                    }
-                    std::thread::sleep(Self::EVERY);
-                }
-            })
-            .map_err(Error::io("link watch thread"))?;
-        Ok(Self { stop, handle })
-    }
-
-    fn stop(self) {
-        self.stop.store(true, Relaxed);
-        let _ = self.handle.join();
-    }
+/// A topic of the session and its figures.
+pub(crate) struct Entry {
+    pub spec: TopicSpec,
+    pub counters: Arc<Counters>,
 }
 
 pub(crate) struct Shared {
     /// Zenoh peers and routers linked to the session, as last counted.
     pub links: AtomicUsize,
+    /// Times every link was lost, and for how long in all (ns; an outage still going on is
+    /// not in it yet: it starts at `down_since_ns`, 0 while a link is up).
+    pub outages: AtomicU64,
+    pub outage_ns: AtomicU64,
+    pub down_since_ns: AtomicU64,
     pub recording: AtomicBool,
     pub queued_bytes: AtomicUsize,
     max_queued_bytes: usize,
-    pub counters: Vec<Counters>,
+    /// The rig's topics, then the ones `--topic` patterns found, in the order they came.
+    pub topics: RwLock<Vec<Entry>>,
+    /// How many of `topics` are the rig's.
+    rig_topics: usize,
+    by_name: Mutex<HashMap<String, usize>>,
+    /// Types zenoh-bridge-ros2dds announces for its keys (learned from its liveliness tokens).
+    pub bridge_types: Mutex<HashMap<String, String>>,
     last_sequence: Mutex<HashMap<(usize, Vec<u8>), i64>>,
     pub active: Mutex<Option<(u64, Instant)>>,
+}
+
+impl Shared {
+    pub(crate) fn new(topics: &[TopicSpec], opts: &RecorderOptions) -> Self {
+        Self {
+            links: AtomicUsize::new(0),
+            outages: AtomicU64::new(0),
+            outage_ns: AtomicU64::new(0),
+            down_since_ns: AtomicU64::new(0),
+            recording: AtomicBool::new(false),
+            queued_bytes: AtomicUsize::new(0),
+            max_queued_bytes: opts.queue_bytes,
+            topics: RwLock::new(
+                topics
+                    .iter()
+                    .map(|t| Entry {
+                        spec: t.clone(),
+                        counters: Arc::default(),
+                    })
+                    .collect(),
+            ),
+            rig_topics: topics.len(),
+            by_name: Mutex::new(
+                topics
+                    .iter()
+                    .enumerate()
+                    .map(|(i, t)| (t.topic.clone(), i))
+                    .collect(),
+            ),
+            bridge_types: Mutex::default(),
+            last_sequence: Mutex::default(),
+            active: Mutex::new(None),
+        }
+    }
+
+    /// Per topic, one figure of its counters.
+    pub(crate) fn counters(&self, pick: fn(&Counters) -> u64) -> Vec<u64> {
+        self.topics
+            .read()
+            .map(|t| t.iter().map(|e| pick(&e.counters)).collect())
+            .unwrap_or_default()
+    }
+
+    /// The counters of topic `i`.
+    pub(crate) fn counters_of(&self, i: usize) -> Option<Arc<Counters>> {
+        self.topics.read().ok()?.get(i).map(|e| e.counters.clone())
+    }
+
+    /// Link outages so far: (count, total ns, an ongoing one included).
+    pub(crate) fn outage_figures(&self) -> (u64, u64) {
+        let since = self.down_since_ns.load(Relaxed);
+        let ongoing = if since > 0 {
+            now_ns().saturating_sub(since)
+        } else {
+            0
+        };
+        (
+            self.outages.load(Relaxed),
+            self.outage_ns.load(Relaxed) + ongoing,
+        )
+    }
 }
 
 pub(crate) enum Item {
@@ -248,7 +130,14 @@ pub(crate) enum Item {
         topic: usize,
         log_time_ns: u64,
         payload: ZBytes,
+        /// The sender's clock when it sent the message (rmw_zenoh's attachment, or the sample's
+        /// Zenoh timestamp), when known.
+        source_ns: Option<u64>,
+        /// The publisher's rmw_zenoh gid, kept for latched topics only.
+        gid: Option<Vec<u8>>,
     },
+    /// A topic a `--topic` pattern found, before its first message.
+    NewTopic(TopicSpec),
     Command(Command),
 }
 
@@ -256,10 +145,14 @@ pub(crate) enum Item {
 #[derive(Clone)]
 pub struct Control {
     tx: Sender<Item>,
-    shared: Arc<Shared>,
+    pub(crate) shared: Arc<Shared>,
 }
 
 impl Control {
+    pub(crate) fn new(tx: Sender<Item>, shared: Arc<Shared>) -> Self {
+        Self { tx, shared }
+    }
+
     /// Queues a command behind every message received so far.
     pub fn send(&self, cmd: Command) {
         match cmd {
@@ -278,16 +171,30 @@ impl Control {
         let _ = self.tx.send(Item::Command(cmd));
     }
 
-    fn on_sample(&self, topic: usize, sample: &Sample) {
+    /// A sample of topic `topic` (whose counters are `counters`); `latched` topics are queued
+    /// whether an episode is open or not.
+    pub(crate) fn on_sample(&self, topic: usize, counters: &Counters, latched: bool, s: &Sample) {
         let log_time_ns = now_ns();
-        let len = sample.payload().len();
-        let counters = &self.shared.counters[topic];
+        let len = s.payload().len();
         counters.received.fetch_add(1, Relaxed);
         counters.bytes.fetch_add(len as u64, Relaxed);
-        if let Some(att) = sample.attachment().and_then(RmwAttachment::parse) {
-            self.check_sequence(topic, att);
+        let att = s.attachment().and_then(RmwAttachment::parse);
+        let source_ns = att
+            .as_ref()
+            .and_then(|a| u64::try_from(a.source_timestamp_ns).ok())
+            .or_else(|| {
+                let t = s.timestamp()?.get_time().to_system_time();
+                let d = t.duration_since(std::time::UNIX_EPOCH).ok()?;
+                u64::try_from(d.as_nanos()).ok()
+            });
+        let gid = match &att {
+            Some(a) if latched => Some(a.source_gid.clone()),
+            _ => None,
+        };
+        if let Some(att) = att {
+            self.check_sequence(topic, counters, att);
         }
-        if !self.shared.recording.load(Relaxed) {
+        if !latched && !self.shared.recording.load(Relaxed) {
             return;
         }
         let before = self.shared.queued_bytes.fetch_add(len, Relaxed);
@@ -301,14 +208,50 @@ impl Control {
         let item = Item::Message {
             topic,
             log_time_ns,
-            payload: sample.payload().clone(),
+            payload: s.payload().clone(),
+            source_ns,
+            gid,
         };
         if self.tx.send(item).is_err() {
             self.shared.queued_bytes.fetch_sub(len, Relaxed);
         }
     }
 
-    fn check_sequence(&self, topic: usize, att: RmwAttachment) {
+    /// A sample a `--topic` pattern matched, on topic `topic` of type `message_type` (when
+    /// known): recorded on a topic of its own from its first message, unless it is a rig topic
+    /// (recorded as such) or no pattern asks for it.
+    pub(crate) fn on_found(&self, topic: &str, message_type: Option<&str>, s: &Sample) {
+        let found = {
+            let Ok(mut names) = self.shared.by_name.lock() else {
+                return;
+            };
+            match names.get(topic) {
+                Some(&i) if i < self.shared.rig_topics => return,
+                Some(&i) => self.shared.counters_of(i).map(|c| (i, c)),
+                None => {
+                    let spec = discovered(topic, message_type);
+                    let counters = Arc::new(Counters::default());
+                    let Ok(mut topics) = self.shared.topics.write() else {
+                        return;
+                    };
+                    let i = topics.len();
+                    topics.push(Entry {
+                        spec: spec.clone(),
+                        counters: counters.clone(),
+                    });
+                    names.insert(topic.to_string(), i);
+                    tracing::info!(topic, message_type, "recording a further topic");
+                    let _ = self.tx.send(Item::NewTopic(spec));
+                    Some((i, counters))
+                }
+            }
+        };
+        if let Some((i, counters)) = found {
+            self.on_sample(i, &counters, false, s);
+        }
+    }
+
+    fn check_sequence(&self, topic: usize, counters: &Counters, att: RmwAttachment) {
         let Ok(mut last) = self.shared.last_sequence.lock() else {
             return;
         };
@@ -316,9 +259,7 @@ impl Control {
         if let Some(prev) = prev {
             let missing = att.sequence_number - prev - 1;
             if missing > 0 {
-                self.shared.counters[topic]
-                    .upstream_gaps
-                    .fetch_add(missing as u64, Relaxed);
+                counters.upstream_gaps.fetch_add(missing as u64, Relaxed);
             }
         }
     }
@@ -351,7 +292,7 @@ pub struct TopicStatus {
 pub struct Status {
     /// The open episode's index and when it started.
     pub episode: Option<(u64, Instant)>,
-    /// Per-topic figures, in rig order.
+    /// Per-topic figures: the rig's topics in rig order, then those `--topic` patterns found.
     pub topics: Vec<TopicStatus>,
     /// Payload bytes waiting for the writer.
     pub queued_bytes: usize,
@@ -393,25 +334,56 @@ pub struct EpisodeReport {
     pub dropped: std::collections::BTreeMap<String, u64>,
     /// Per topic: upstream sequence gaps during the episode, sorted by topic.
     pub upstream_gaps: std::collections::BTreeMap<String, u64>,
+    /// Per latched topic: the messages kept from before the episode, written at its start.
+    pub latched_at_start: std::collections::BTreeMap<String, u64>,
+    /// Times every Zenoh link was lost during the episode (a bridge or peer restarting).
+    pub link_outages: u64,
+    /// Seconds without any link during the episode.
+    pub link_outage_s: f64,
+    /// What the recorder noticed, one line each, naming the topic (depth in an undeclared
+    /// encoding, a `camera_info` of another size, a latched topic with nothing to write).
+    pub warnings: Vec<String>,
 }
 
 /// A running recording session.
 pub struct Recorder {
     session: zenoh::Session,
-    subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    subscribers: Vec<Sub>,
     control: Control,
     shared: Arc<Shared>,
-    topics: Vec<TopicSpec>,
     events: Receiver<Event>,
     writer: Option<JoinHandle<()>>,
     links: Option<LinkWatch>,
 }
 
 impl Recorder {
+    pub(crate) fn new(
+        session: zenoh::Session,
+        subscribers: Vec<Sub>,
+        control: Control,
+        shared: Arc<Shared>,
+        events: Receiver<Event>,
+        writer: JoinHandle<()>,
+        links: LinkWatch,
+    ) -> Self {
+        Self {
+            session,
+            subscribers,
+            control,
+            shared,
+            events,
+            writer: Some(writer),
+            links: Some(links),
+        }
+    }
     /// Zenoh peers and routers the session is linked to (counted every 250 ms): 0 while the
     /// bridge or router is unreachable.
     pub fn zenoh_links(&self) -> usize {
         self.shared.links.load(Relaxed)
+    }
+    /// Times every link was lost since the session opened.
+    pub fn link_outages(&self) -> u64 {
+        self.shared.outage_figures().0
     }
     /// A handle for sending commands from other threads.
     pub fn control(&self) -> Control {
@@ -432,17 +404,22 @@ impl Recorder {
     /// Live figures.
     pub fn status(&self) -> Status {
         let topics = self
+            .shared
             .topics
-            .iter()
-            .zip(&self.shared.counters)
-            .map(|(t, c)| TopicStatus {
-                topic: t.topic.clone(),
-                received: c.received.load(Relaxed),
-                bytes: c.bytes.load(Relaxed),
-                dropped: c.dropped.load(Relaxed),
-                upstream_gaps: c.upstream_gaps.load(Relaxed),
+            .read()
+            .map(|topics| {
+                topics
+                    .iter()
+                    .map(|e| TopicStatus {
+                        topic: e.spec.topic.clone(),
+                        received: e.counters.received.load(Relaxed),
+                        bytes: e.counters.bytes.load(Relaxed),
+                        dropped: e.counters.dropped.load(Relaxed),
+                        upstream_gaps: e.counters.upstream_gaps.load(Relaxed),
+                    })
+                    .collect()
             })
-            .collect();
+            .unwrap_or_default();
         let episode = self.shared.active.lock().ok().and_then(|a| *a);
         Status {
             episode,
@@ -465,7 +442,7 @@ impl Recorder {
             links.stop();
         }
         for s in self.subscribers.drain(..) {
-            let _ = s.undeclare().wait();
+            s.undeclare();
         }
         self.control.send(Command::Quit);
         if let Some(h) = self.writer.take() {

@@ -1,23 +1,30 @@
 //! The writer thread: drains the queue into the open episode, flushes on a timer, and turns
-//! commands into episode files with their metadata.
+//! commands into episode files with their metadata. It keeps the latest message of every
+//! latched publisher and writes them at the start of every episode (`log_time` the episode's
+//! start, `publish_time` when they were published), and it notes what it sees wrong in the
+//! cameras' streams (see [`crate::checks`]).
 
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::Arc;
 use std::time::Instant;
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
-use scaledp_schema::rig::TopicSpec;
+use scaledp_schema::msg::{CompressedVideo, MsgSearch};
+use scaledp_schema::{EpisodeMetadata, RosMessage};
 use zenoh::Wait;
 
+use crate::channels::Channel;
+use crate::checks::Checks;
 use crate::control::{Command, Label};
-use scaledp_schema::msg::CompressedVideo;
-use scaledp_schema::{EpisodeMetadata, RosMessage};
-
 use crate::episode::EpisodeWriter;
 use crate::error::{Error, Result};
-use crate::session::{now_ns, EpisodeReport, Event, Item, RecorderOptions, Shared};
+use crate::latched::LatchedStore;
+use crate::options::RecorderOptions;
+use crate::session::{now_ns, Event, Item, Shared};
+
+mod stop;
 
 struct Active {
     index: u64,
@@ -26,21 +33,30 @@ struct Active {
     start_meta: EpisodeMetadata,
     dropped_at_start: Vec<u64>,
     gaps_at_start: Vec<u64>,
+    /// Link outages (count, ns) when the episode started.
+    outages_at_start: (u64, u64),
     /// Per topic: a video topic whose first keyframe has not come yet. Its frames until then
     /// cannot be decoded (they reference pictures from before the episode) and are not written.
     awaiting_keyframe: Vec<bool>,
     /// Per topic: frames left out that way.
     before_keyframe: Vec<u64>,
+    /// Per latched topic: messages written at the start.
+    latched_at_start: BTreeMap<String, u64>,
+    /// What was noticed, each once.
+    warnings: BTreeSet<String>,
 }
 
 pub(crate) struct WriterThread {
     opts: RecorderOptions,
-    topics: Vec<TopicSpec>,
+    channels: Vec<Channel>,
+    search: MsgSearch,
     shared: Arc<Shared>,
     events: Sender<Event>,
     session: zenoh::Session,
     next_index: u64,
     active: Option<Active>,
+    latched: LatchedStore,
+    checks: Checks,
 }
 
 /// The first index not used by any `episode_NNNNNN.mcap[.partial]` in `dir` or `dir/discarded`.
@@ -78,21 +94,27 @@ pub fn episode_file_name(index: u64) -> String {
 impl WriterThread {
     pub(crate) fn new(
         opts: RecorderOptions,
-        topics: Vec<TopicSpec>,
+        channels: Vec<Channel>,
+        search: MsgSearch,
         shared: Arc<Shared>,
         events: Sender<Event>,
         session: zenoh::Session,
-    ) -> Result<Self> {
+    ) -> Self {
         let next_index = next_free_index(&opts.out_dir);
-        Ok(Self {
+        let specs: Vec<_> = channels.iter().map(|c| c.spec.clone()).collect();
+        let checks = Checks::new(&opts.rig, &specs);
+        Self {
             opts,
-            topics,
+            channels,
+            search,
             shared,
             events,
             session,
             next_index,
             active: None,
-        })
+            latched: LatchedStore::default(),
+            checks,
+        }
     }
 
     pub(crate) fn run(mut self, rx: Receiver<Item>) {
@@ -104,28 +126,24 @@ impl WriterThread {
                     topic,
                     log_time_ns,
                     payload,
+                    source_ns,
+                    gid,
                 }) => {
                     self.shared.queued_bytes.fetch_sub(payload.len(), Relaxed);
-                    if let Some(a) = self.active.as_mut() {
-                        let data = payload.to_bytes();
-                        if a.awaiting_keyframe[topic] {
-                            if !first_keyframe(&data) {
-                                a.before_keyframe[topic] += 1;
-                                continue;
-                            }
-                            a.awaiting_keyframe[topic] = false;
-                        }
-                        // publish_time = capture stamp; log_time when the header is unreadable.
-                        let publish = scaledp_schema::msg::header_stamp(&data)
-                            .map(|t| t.as_ns())
-                            .unwrap_or(log_time_ns);
-                        let res = self
-                            .active
-                            .as_mut()
-                            .map(|a| a.writer.write(topic, log_time_ns, publish, &data));
-                        if let Some(Err(e)) = res {
-                            self.fail(e);
-                        }
+                    let data = payload.to_bytes();
+                    self.message(topic, log_time_ns, &data, source_ns, gid.as_deref());
+                }
+                Ok(Item::NewTopic(spec)) => {
+                    let channel = Channel::resolve(spec, &mut self.search);
+                    self.checks.push_topic(&channel.spec.topic);
+                    let added = self.active.as_mut().map(|a| {
+                        a.awaiting_keyframe.push(false);
+                        a.before_keyframe.push(0);
+                        a.writer.add_channel(&channel.channel)
+                    });
+                    self.channels.push(channel);
+                    if let Some(Err(e)) = added {
+                        self.fail(e);
                     }
                 }
                 Ok(Item::Command(Command::Quit)) | Err(RecvTimeoutError::Disconnected) => {
@@ -144,6 +162,47 @@ impl WriterThread {
         }
     }
 
+    /// One received message: kept if latched, written if an episode is open.
+    fn message(
+        &mut self,
+        topic: usize,
+        log_time_ns: u64,
+        data: &[u8],
+        source_ns: Option<u64>,
+        gid: Option<&[u8]>,
+    ) {
+        let Some(ch) = self.channels.get(topic) else {
+            return;
+        };
+        // publish_time = the capture stamp; else the sender's clock; else when it arrived.
+        let publish = ch
+            .stamp
+            .read(data)
+            .map(|t| t.as_ns())
+            .or(source_ns)
+            .unwrap_or(log_time_ns);
+        if ch.spec.latched && !self.latched.update(topic, gid, data, publish) {
+            return; // already kept, and written at the start of the open episode
+        }
+        let problem = self.checks.inspect(topic, data);
+        let Some(a) = self.active.as_mut() else {
+            return;
+        };
+        if a.awaiting_keyframe[topic] {
+            if !first_keyframe(data) {
+                a.before_keyframe[topic] += 1;
+                return;
+            }
+            a.awaiting_keyframe[topic] = false;
+        }
+        if let Some(p) = problem {
+            a.warnings.insert(p);
+        }
+        if let Err(e) = a.writer.write(topic, log_time_ns, publish, data) {
+            self.fail(e);
+        }
+    }
+
     fn handle(&mut self, cmd: Command) {
         match (cmd, self.active.is_some()) {
             (Command::Start | Command::Toggle, false) => self.start(),
@@ -151,10 +210,6 @@ impl WriterThread {
             (Command::Toggle, true) => self.stop(Label::Unlabeled),
             (cmd, open) => tracing::debug!(?cmd, open, "command ignored in this state"),
         }
-    }
-
-    fn counters(&self, pick: fn(&crate::session::Counters) -> u64) -> Vec<u64> {
-        self.shared.counters.iter().map(pick).collect()
     }
 
     fn start(&mut self) {
@@ -172,6 +227,7 @@ impl WriterThread {
             recorder_version: Some(env!("CARGO_PKG_VERSION").into()),
             ..EpisodeMetadata::default()
         };
+        let channels: Vec<_> = self.channels.iter().map(|c| c.channel.clone()).collect();
         // The output directory is (re)created for every episode: one removed while the session
         // runs costs the episode being written, not the ones after it.
         let created = std::fs::create_dir_all(&self.opts.out_dir)
@@ -179,35 +235,10 @@ impl WriterThread {
             .and_then(|()| {
                 self.opts
                     .episode
-                    .create(&path, &self.topics, start_meta.start_record())
+                    .create_channels(&path, &channels, start_meta.start_record())
             });
-        match created {
-            Ok(writer) => {
-                let partial = writer.partial_path().to_path_buf();
-                self.active = Some(Active {
-                    index,
-                    writer,
-                    started: Instant::now(),
-                    start_meta,
-                    dropped_at_start: self.counters(|c| c.dropped.load(Relaxed)),
-                    gaps_at_start: self.counters(|c| c.upstream_gaps.load(Relaxed)),
-                    awaiting_keyframe: self
-                        .topics
-                        .iter()
-                        .map(|t| t.message_type == CompressedVideo::TYPE_NAME)
-                        .collect(),
-                    before_keyframe: vec![0; self.topics.len()],
-                });
-                if let Ok(mut a) = self.shared.active.lock() {
-                    *a = Some((index, Instant::now()));
-                }
-                tracing::info!(index, path = %partial.display(), "episode started");
-                self.publish_status(&serde_json::json!({"event": "started", "episode": index}));
-                let _ = self.events.send(Event::Started {
-                    index,
-                    path: partial,
-                });
-            }
+        let writer = match created {
+            Ok(w) => w,
             Err(e) => {
                 self.shared.recording.store(false, Relaxed);
                 tracing::error!("episode {index}: {e}");
@@ -215,89 +246,70 @@ impl WriterThread {
                     index,
                     error: e.to_string(),
                 });
+                return;
             }
+        };
+        let partial = writer.partial_path().to_path_buf();
+        let n = self.channels.len();
+        self.active = Some(Active {
+            index,
+            writer,
+            started: Instant::now(),
+            start_meta,
+            dropped_at_start: self.shared.counters(|c| c.dropped.load(Relaxed)),
+            gaps_at_start: self.shared.counters(|c| c.upstream_gaps.load(Relaxed)),
+            outages_at_start: self.shared.outage_figures(),
+            awaiting_keyframe: self
+                .channels
+                .iter()
+                .map(|c| c.spec.message_type == CompressedVideo::TYPE_NAME)
+                .collect(),
+            before_keyframe: vec![0; n],
+            latched_at_start: BTreeMap::new(),
+            warnings: BTreeSet::new(),
+        });
+        if let Err(e) = self.write_latched(index, started_ns) {
+            self.fail(e);
+            return;
         }
+        if let Ok(mut a) = self.shared.active.lock() {
+            *a = Some((index, Instant::now()));
+        }
+        tracing::info!(index, path = %partial.display(), "episode started");
+        self.publish_status(&serde_json::json!({"event": "started", "episode": index}));
+        let _ = self.events.send(Event::Started {
+            index,
+            path: partial,
+        });
     }
 
-    fn stop(&mut self, outcome: Label) {
-        let Some(active) = self.active.take() else {
-            return;
+    /// Writes what every latched topic holds at the episode's start; a latched topic with
+    /// nothing yet is a warning (it is written as soon as it arrives).
+    fn write_latched(&mut self, index: u64, started_ns: u64) -> Result<()> {
+        let Some(a) = self.active.as_mut() else {
+            return Ok(());
         };
-        if let Ok(mut a) = self.shared.active.lock() {
-            *a = None;
-        }
-        let index = active.index;
-        for ((t, &n), &waiting) in self
-            .topics
-            .iter()
-            .zip(&active.before_keyframe)
-            .zip(&active.awaiting_keyframe)
-        {
-            if waiting && n > 0 {
-                tracing::warn!(index, topic = %t.topic, "{n} video frames and no keyframe: nothing of this camera was recorded");
-            } else if n > 0 {
-                tracing::info!(index, topic = %t.topic, "{n} video frames before the first keyframe left out (undecodable)");
+        for (i, ch) in self.channels.iter().enumerate() {
+            if !ch.spec.latched {
+                continue;
+            }
+            let mut n = 0;
+            for l in self.latched.of(i) {
+                a.writer.write(i, started_ns, l.publish_ns, &l.payload)?;
+                n += 1;
+            }
+            a.latched_at_start.insert(ch.spec.topic.clone(), n);
+            if n == 0 {
+                let w = format!(
+                    "{}: nothing latched at the start of the episode (its publisher not up, \
+                     or not serving late joiners); written when it arrives",
+                    ch.spec.topic
+                );
+                tracing::warn!("episode {index}: {w}");
+                a.warnings.insert(w);
             }
         }
-        let end_ns = now_ns();
-        let duration_s = active.started.elapsed().as_secs_f64();
-        let per_topic = |now: Vec<u64>, start: &[u64]| -> BTreeMap<String, u64> {
-            self.topics
-                .iter()
-                .zip(now.iter().zip(start))
-                .map(|(t, (n, s))| (t.topic.clone(), n - s))
-                .collect()
-        };
-        let dropped = per_topic(
-            self.counters(|c| c.dropped.load(Relaxed)),
-            &active.dropped_at_start,
-        );
-        let gaps = per_topic(
-            self.counters(|c| c.upstream_gaps.load(Relaxed)),
-            &active.gaps_at_start,
-        );
-        let counts: BTreeMap<&str, u64> = self
-            .topics
-            .iter()
-            .zip(active.writer.message_counts())
-            .map(|(t, n)| (t.topic.as_str(), *n))
-            .collect();
-        let meta = EpisodeMetadata {
-            end_time_ns: Some(end_ns),
-            duration_s: Some(duration_s),
-            label: Some(outcome),
-            message_counts: counts.iter().map(|(t, n)| (t.to_string(), *n)).collect(),
-            dropped: dropped.clone(),
-            upstream_gaps: gaps.clone(),
-            ..active.start_meta.clone()
-        }
-        .end_record();
-        let dest: Option<PathBuf> = (outcome == Label::Discarded).then(|| {
-            self.opts
-                .out_dir
-                .join("discarded")
-                .join(episode_file_name(index))
-        });
-        match active.writer.finish(meta, dest.as_deref()) {
-            Ok(summary) => {
-                tracing::info!(index, %outcome, path = %summary.path.display(), "episode finished");
-                self.publish_status(&serde_json::json!({
-                    "event": "finished", "episode": index, "outcome": outcome.as_str(),
-                    "path": summary.path.display().to_string(), "messages": counts, "bytes": summary.bytes,
-                    "dropped": dropped, "upstream_gaps": gaps,
-                }));
-                let report = EpisodeReport {
-                    index,
-                    outcome,
-                    duration_s,
-                    summary,
-                    dropped,
-                    upstream_gaps: gaps,
-                };
-                let _ = self.events.send(Event::Finished(report));
-            }
-            Err(e) => self.report_failure(index, e),
-        }
+        Ok(())
     }
 
     fn fail(&mut self, e: Error) {

@@ -54,6 +54,17 @@ pub mod keys {
     pub const DROPPED: &str = "dropped";
     /// JSON object: messages lost upstream per topic (rmw_zenoh sequence gaps).
     pub const UPSTREAM_GAPS: &str = "upstream_gaps";
+    /// JSON object: per latched topic (`/tf_static`), the messages kept from before the
+    /// episode and written at its start (kept in [`super::EpisodeMetadata::extra`]).
+    pub const LATCHED_AT_START: &str = "latched_at_start";
+    /// Times every Zenoh link was lost during the episode (a bridge or peer restarting).
+    pub const LINK_OUTAGES: &str = "link_outages";
+    /// Seconds without any Zenoh link during the episode.
+    pub const LINK_OUTAGE_S: &str = "link_outage_s";
+    /// JSON array: what the recorder noticed, one line each naming the topic (depth in an
+    /// encoding the rig does not declare, a `camera_info` of another size than its images, a
+    /// latched topic with nothing to write at the start).
+    pub const WARNINGS: &str = "warnings";
 }
 
 /// How the operator labelled an episode (stored under `outcome`). Not to be confused with the

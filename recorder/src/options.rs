@@ -1,0 +1,168 @@
+//! Settings of a recording session and how `start` opens it: definitions resolved, subscribers
+//! declared, the writer and the link watch started.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use scaledp_schema::msg::MsgSearch;
+use scaledp_schema::rig::Rig;
+
+use crate::channels::Channel;
+use crate::episode::{Compression, EpisodeOptions};
+use crate::error::{Error, Result};
+use crate::links::LinkWatch;
+use crate::patterns::TopicPattern;
+use crate::session::{Control, Recorder, Shared};
+use crate::subscribe;
+use crate::writer::WriterThread;
+
+/// Settings of a recording session; `start` opens it.
+#[derive(Debug, Clone)]
+pub struct RecorderOptions {
+    pub(crate) rig: Rig,
+    pub(crate) out_dir: PathBuf,
+    pub(crate) task: String,
+    pub(crate) operator: String,
+    pub(crate) episode: EpisodeOptions,
+    pub(crate) queue_bytes: usize,
+    pub(crate) flush_interval: Duration,
+    pub(crate) control_prefix: String,
+    pub(crate) bridge_namespace: String,
+    pub(crate) patterns: Vec<TopicPattern>,
+    pub(crate) msg_search: MsgSearch,
+}
+
+impl RecorderOptions {
+    /// Records every topic of `rig` into `out_dir`. Defaults: LZ4 chunks of 8 MiB, a 1 GiB
+    /// queue, a flush every 500 ms, control on `scaledp/recorder/control`, no bridge namespace,
+    /// no further topics, only scaledp's own message definitions.
+    pub fn new(rig: Rig, out_dir: impl Into<PathBuf>) -> Self {
+        Self {
+            rig,
+            out_dir: out_dir.into(),
+            task: String::new(),
+            operator: String::new(),
+            episode: EpisodeOptions::new(),
+            queue_bytes: 1 << 30,
+            flush_interval: Duration::from_millis(500),
+            control_prefix: "scaledp/recorder".into(),
+            bridge_namespace: String::new(),
+            patterns: Vec::new(),
+            msg_search: MsgSearch::new(),
+        }
+    }
+    /// The task instruction stored with every episode, e.g. "put the cup on the plate".
+    pub fn task(mut self, task: impl Into<String>) -> Self {
+        self.task = task.into();
+        self
+    }
+    /// Who teleoperated.
+    pub fn operator(mut self, operator: impl Into<String>) -> Self {
+        self.operator = operator.into();
+        self
+    }
+    /// Chunk compression.
+    pub fn compression(mut self, c: Compression) -> Self {
+        self.episode = self.episode.compression(c);
+        self
+    }
+    /// Target chunk size (bytes).
+    pub fn chunk_size(mut self, bytes: u64) -> Self {
+        self.episode = self.episode.chunk_size(bytes);
+        self
+    }
+    /// Most payload bytes waiting for the writer before new messages are dropped (and counted).
+    pub fn queue_bytes(mut self, bytes: usize) -> Self {
+        self.queue_bytes = bytes.max(1);
+        self
+    }
+    /// How often the open chunk is closed and handed to the OS (at most 1 s).
+    pub fn flush_interval(mut self, every: Duration) -> Self {
+        self.flush_interval = every.clamp(Duration::from_millis(10), Duration::from_secs(1));
+        self
+    }
+    /// Key prefix for `<prefix>/control` (commands in) and `<prefix>/status` (events out).
+    pub fn control_prefix(mut self, prefix: impl Into<String>) -> Self {
+        self.control_prefix = prefix.into().trim_matches('/').to_string();
+        self
+    }
+    /// Namespace zenoh-bridge-ros2dds was started with (`-n`), if any.
+    pub fn bridge_namespace(mut self, ns: impl Into<String>) -> Self {
+        self.bridge_namespace = ns.into();
+        self
+    }
+    /// Also records the topics `pattern` matches (a glob, or a name whose type comes from its
+    /// rmw_zenoh key or the bridge's announcement), each as a channel of its own from its first
+    /// message on. Rig topics are recorded once, as rig topics. (A concrete `NAME:TYPE` is
+    /// better added to the rig's further topics: it is then part of the stored rig.)
+    pub fn topic_pattern(mut self, pattern: TopicPattern) -> Self {
+        self.patterns.push(pattern);
+        self
+    }
+    /// Where definitions of types scaledp does not know are looked up (`AMENT_PREFIX_PATH`,
+    /// `--msg-path`).
+    pub fn msg_search(mut self, search: MsgSearch) -> Self {
+        self.msg_search = search;
+        self
+    }
+
+    /// Opens a Zenoh session with `config`, subscribes to every topic of the rig (bridge and
+    /// rmw_zenoh keys; latched topics also through the publishers' caches) and to the control
+    /// key, and starts the writer thread. No episode is open until a [`crate::Command::Start`].
+    pub fn start(self, config: zenoh::Config) -> Result<Recorder> {
+        std::fs::create_dir_all(&self.out_dir).map_err(Error::io(&self.out_dir))?;
+        let topics = self.rig.topics();
+        let mut search = self.msg_search.clone();
+        let channels: Vec<Channel> = topics
+            .iter()
+            .map(|t| Channel::resolve(t.clone(), &mut search))
+            .collect();
+        let session = crate::net::open(config)?;
+        let shared = Arc::new(Shared::new(&topics, &self));
+        let (tx, rx) = crossbeam_channel::unbounded();
+        let control = Control::new(tx, shared.clone());
+        let ns = self.bridge_namespace.clone();
+        let mut subscribers = subscribe::topics(&session, &control, &topics, &ns)?;
+        for p in &self.patterns {
+            subscribers.extend(subscribe::pattern(&session, &control, p, &ns)?);
+        }
+        if !self.patterns.is_empty() {
+            subscribers.push(subscribe::bridge_types(&session, &shared)?);
+        }
+        subscribers.push(subscribe::control(
+            &session,
+            &control,
+            &self.control_prefix,
+        )?);
+        let (events_tx, events) = crossbeam_channel::unbounded();
+        let writer = WriterThread::new(
+            self,
+            channels,
+            search,
+            shared.clone(),
+            events_tx,
+            session.clone(),
+        );
+        let handle = std::thread::Builder::new()
+            .name("scaledp-writer".into())
+            .spawn(move || writer.run(rx))
+            .map_err(Error::io("writer thread"))?;
+        // The caches of zenoh-bridge-ros2dds up to 1.5.0 are queried now and whenever a link
+        // comes (back) up: a bridge restarted meanwhile serves its cache again.
+        let latched = subscribe::latched_keys(&topics, &ns);
+        let (s, c) = (session.clone(), control.clone());
+        let query = move || subscribe::query_bridge_caches(&s, &c, &latched);
+        query();
+        let links = LinkWatch::start(session.clone(), shared.clone(), Box::new(query))?;
+        Ok(Recorder::new(
+            session,
+            subscribers,
+            control,
+            shared,
+            events,
+            handle,
+            links,
+        ))
+    }
+}
