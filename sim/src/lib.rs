@@ -13,7 +13,11 @@
 //!   the rig's cameras and joint states exactly as zenoh-bridge-ros2dds does (key = topic without
 //!   its leading `/`, payload = CDR with its encapsulation header) or as rmw_zenoh does
 //!   (domain/topic/type/hash keys with attachments); it takes commands on the rig's command
-//!   topics, resets on `scaledp/sim/reset` and reports the task on `scaledp/sim/task`.
+//!   topics, resets on `scaledp/sim/reset` and reports the task on `scaledp/sim/task`. For a
+//!   rig that lists them it publishes as realsense2_camera and the ZED wrapper do: registered
+//!   depth in the rig's encoding ([`depth`]), `camera_info` with the renderer's pinhole K, `/tf`
+//!   at the rig's rate and `/tf_static` once, served to late joiners from a cache the way
+//!   zenoh-bridge-ros2dds or rmw_zenoh serve it ([`tf`], [`LatchedCache`]).
 //! - [`synth::write_episode`] writes the operator's episode straight to an MCAP file, faster than
 //!   real time and byte-reproducible; [`headless::run_episode`] scores it without rendering.
 //!
@@ -22,9 +26,11 @@
 //! wall-clock origin and, live, the timing of threads is fixed by the seed.
 
 pub mod bridge;
+pub mod depth;
 mod error;
 pub mod headless;
 pub mod ik;
+mod latched;
 pub mod messages;
 pub mod operator;
 pub mod pedal;
@@ -34,11 +40,13 @@ pub mod scene;
 mod streams;
 pub mod synth;
 pub mod task;
+pub mod tf;
 mod video;
 pub mod world;
 
 pub use error::{Error, Result};
 pub use headless::{run_episode, EpisodeResult, OfflineRun};
+pub use latched::LatchedCache;
 pub use operator::{ScriptedOperator, LEADER_RATE_HZ};
 pub use pedal::{EpisodeLine, Pedal};
 pub use runtime::{PublishHook, Sim, SimOptions};

@@ -170,6 +170,11 @@ impl View {
     pub fn size(&self) -> (usize, usize) {
         (self.width, self.height)
     }
+
+    /// The pinhole intrinsics: focal length and principal point (pixels), `(f, cx, cy)`.
+    pub fn intrinsics(&self) -> (f64, f64, f64) {
+        (self.f_px, self.cx, self.cy)
+    }
 }
 
 /// Pixel writer for one encoding.

@@ -19,15 +19,18 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use scaledp_recorder::keys::{bridge_key, rmw_key, rmw_key_expr};
+use scaledp_recorder::keys::{bridge_key, rmw_key, rmw_key_expr, RmwAttachment};
 use scaledp_recorder::now_ns;
 use scaledp_schema::rig::{CommandType, Rig};
+use scaledp_schema::RosMessage;
 use zenoh::qos::CongestionControl;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
 use crate::headless::EpisodeResult;
+use crate::latched::{LatchedCache, LatchedPublisher};
 use crate::operator::ScriptedOperator;
+use crate::render::View;
 use crate::scene::Scene;
 use crate::task::TaskState;
 use crate::world::{ArmCommand, World, WorldState};
@@ -54,6 +57,7 @@ pub struct SimOptions {
     operator: bool,
     autoplay: bool,
     control_prefix: String,
+    latched: Option<LatchedCache>,
 }
 
 impl SimOptions {
@@ -71,6 +75,7 @@ impl SimOptions {
             operator: false,
             autoplay: false,
             control_prefix: "scaledp/sim".into(),
+            latched: None,
         }
     }
     /// The seed of the first episode (cubes, targets, the operator's hands) and of the streams'
@@ -120,6 +125,12 @@ impl SimOptions {
     /// half a second before each, a second after).
     pub fn autoplay(mut self, on: bool) -> Self {
         self.autoplay = on;
+        self
+    }
+    /// How `/tf_static` is served to late joiners (default: as the key style's peer does it,
+    /// the bridge's `@ros2_pub_cache` queryable, rmw_zenoh's AdvancedPublisher cache).
+    pub fn latched_cache(mut self, cache: LatchedCache) -> Self {
+        self.latched = Some(cache);
         self
     }
     /// Prefix of `<prefix>/reset` and `<prefix>/task`.
@@ -221,12 +232,17 @@ impl SimOptions {
             .into_iter()
             .enumerate()
         {
-            let key = self.key(&stream.topic, stream.message_type);
-            let publisher = session
-                .declare_publisher(key.clone())
-                .congestion_control(CongestionControl::Block)
-                .wait()
-                .map_err(zerr(&key))?;
+            let mut publishers = Vec::new();
+            for (topic, message_type) in &stream.outputs {
+                let key = self.key(topic, message_type);
+                publishers.push(
+                    session
+                        .declare_publisher(key.clone())
+                        .congestion_control(CongestionControl::Block)
+                        .wait()
+                        .map_err(zerr(&key))?,
+                );
+            }
             let ctx = crate::streams::StreamCtx {
                 shared: shared.clone(),
                 hook: self.hook.clone(),
@@ -237,13 +253,14 @@ impl SimOptions {
                 rmw: (self.keys == KeyStyle::Rmw).then(|| vec![n as u8; 16]),
                 realtime: self.start_time_ns.is_none(),
             };
-            let topic = stream.topic.clone();
+            let topic = stream.outputs[0].0.clone();
             let handle = std::thread::Builder::new()
                 .name(format!("sim:{topic}"))
-                .spawn(move || stream.run(ctx, publisher))
+                .spawn(move || stream.run(ctx, publishers))
                 .map_err(|source| Error::Thread { topic, source })?;
             threads.push(handle);
         }
+        let tf_static = self.publish_tf_static(session, &shared, t0)?;
         let mut workers = Vec::new();
         let sh = shared.clone();
         workers.push(
@@ -299,16 +316,58 @@ impl SimOptions {
             threads,
             workers,
             _subscribers: subscribers,
+            _tf_static: tf_static,
         })
+    }
+
+    /// Publishes the rig's `/tf_static` once, stamped `t0`, on a publisher that serves it to
+    /// late joiners as the key style's peer does; kept alive with the simulation.
+    fn publish_tf_static(
+        &self,
+        session: &zenoh::Session,
+        shared: &Shared,
+        t0: u64,
+    ) -> Result<Option<LatchedPublisher>> {
+        let Some(tf) = self.rig.tf.as_ref().filter(|t| t.static_) else {
+            return Ok(None);
+        };
+        let cache = self.latched.unwrap_or(match self.keys {
+            KeyStyle::Bridge => LatchedCache::BridgeQueryable,
+            KeyStyle::Rmw => LatchedCache::Advanced,
+        });
+        let key = self.key(&tf.static_topic, scaledp_schema::rig::TF_MESSAGE);
+        let publisher = LatchedPublisher::declare(session, &key, cache)?;
+        let views: Vec<View> = self
+            .rig
+            .cameras
+            .iter()
+            .enumerate()
+            .map(|(i, c)| View::for_camera(&shared.scene, c, i))
+            .collect();
+        let payload = crate::tf::tf_static(&self.rig, &shared.scene, &views, t0).to_cdr();
+        if let Some(h) = &self.hook {
+            h(&tf.static_topic, &payload);
+        }
+        let attachment = (self.keys == KeyStyle::Rmw).then(|| {
+            RmwAttachment {
+                sequence_number: 1,
+                source_timestamp_ns: now_ns() as i64,
+                source_gid: vec![0xF5; 16],
+            }
+            .to_zbytes()
+        });
+        publisher.publish(payload, attachment);
+        Ok(Some(publisher))
     }
 }
 
 /// A running simulation.
 pub struct Sim {
     shared: Arc<Shared>,
-    threads: Vec<JoinHandle<(String, u64)>>,
+    threads: Vec<JoinHandle<Vec<(String, u64)>>>,
     workers: Vec<JoinHandle<()>>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
+    _tf_static: Option<LatchedPublisher>,
 }
 
 impl Sim {
@@ -376,8 +435,8 @@ impl Sim {
         }
     }
 
-    /// Stops every thread and returns (topic, messages published) per measurement stream, in
-    /// rig order.
+    /// Stops every thread and returns (topic, messages published) per measurement topic, in
+    /// the streams' order (cameras with what they publish beside colour, arms, grippers, /tf).
     pub fn stop(mut self) -> Vec<(String, u64)> {
         self.shared.stop.store(true, Ordering::Relaxed);
         for w in std::mem::take(&mut self.workers) {
@@ -386,6 +445,7 @@ impl Sim {
         std::mem::take(&mut self.threads)
             .into_iter()
             .filter_map(|h| h.join().ok())
+            .flatten()
             .collect()
     }
 }

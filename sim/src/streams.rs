@@ -1,4 +1,7 @@
-//! The live publishing threads: one per camera, arm and gripper topic, each at the rig's rate.
+//! The live publishing threads: one per camera, arm and gripper, and one for `/tf`, each at the
+//! rig's rate. A camera's thread publishes, with the same capture stamp, its colour image and
+//! what its driver publishes beside it when the rig lists it: registered depth, the colour
+//! image's and the depth image's `camera_info`.
 //!
 //! `header.stamp` is the capture time on the rate's grid from the origin plus seeded jitter; the
 //! message is built from the world as it is at that instant and leaves a realistic latency
@@ -13,10 +16,11 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use scaledp_recorder::keys::RmwAttachment;
 use scaledp_recorder::now_ns;
-use scaledp_schema::rig::{Arm, Camera, CameraModel};
+use scaledp_schema::rig::{Arm, Camera, CameraModel, CAMERA_INFO, TF_MESSAGE};
 use scaledp_schema::RosMessage;
 use zenoh::Wait;
 
+use crate::depth::{camera_info, DepthSensor};
 use crate::headless::OfflineRun;
 use crate::messages;
 use crate::render::{self, View};
@@ -33,7 +37,13 @@ pub(crate) enum Kind {
         cache: Vec<Vec<u8>>,
         /// For a camera publishing compressed video.
         encoder: Option<VideoEncoder>,
+        /// Registered depth, when the rig lists it (its output follows the colour image's).
+        depth: Option<DepthSensor>,
+        /// How many `camera_info` outputs follow (the colour image's, then the depth's).
+        infos: usize,
     },
+    /// `/tf`: every arm's flange in its base.
+    Tf,
     Arm {
         index: usize,
         arm: Arm,
@@ -45,8 +55,8 @@ pub(crate) enum Kind {
 }
 
 pub(crate) struct Stream {
-    pub topic: String,
-    pub message_type: &'static str,
+    /// What it publishes, (topic, type) each, in the order [`Stream::message`] makes them.
+    pub outputs: Vec<(String, &'static str)>,
     pub rate_hz: f64,
     /// Base latency and the width of its uniform jitter (ms).
     pub latency_ms: (f64, f64),
@@ -99,9 +109,32 @@ pub(crate) fn streams(
         } else {
             15.0
         };
+        let mut outputs = vec![(cam.topic.clone(), cam.message_type())];
+        let depth = match &cam.depth {
+            Some(d) if d.compressed => {
+                tracing::warn!(
+                    "{}: the simulator publishes raw depth only; this compressedDepth topic stays silent",
+                    d.topic
+                );
+                None
+            }
+            Some(d) => {
+                outputs.push((d.topic.clone(), d.message_type()));
+                Some(DepthSensor::new(d.encoding))
+            }
+            None => None,
+        };
+        let infos = [
+            cam.camera_info_topic.as_ref(),
+            cam.depth
+                .as_ref()
+                .and_then(|d| d.camera_info_topic.as_ref()),
+        ];
+        for t in infos.iter().flatten() {
+            outputs.push(((*t).clone(), CAMERA_INFO));
+        }
         out.push(Stream {
-            topic: cam.topic.clone(),
-            message_type: cam.message_type(),
+            outputs,
             rate_hz: cam.fps,
             latency_ms: (latency_ms, 8.0),
             stamp_jitter_ms: 0.5,
@@ -113,13 +146,14 @@ pub(crate) fn streams(
                     Some(_) => Some(VideoEncoder::new(cam).map_err(crate::Error::Video)?),
                     None => None,
                 },
+                depth,
+                infos: infos.iter().flatten().count(),
             },
         });
     }
     for (i, arm) in rig.arms.iter().enumerate() {
         out.push(Stream {
-            topic: arm.joint_state_topic.clone(),
-            message_type: "sensor_msgs/msg/JointState",
+            outputs: vec![(arm.joint_state_topic.clone(), JOINT_STATE)],
             rate_hz: arm.rate_hz,
             latency_ms: (0.3, 0.4),
             stamp_jitter_ms: 0.02,
@@ -130,8 +164,7 @@ pub(crate) fn streams(
         });
         if let Some(g) = &arm.gripper {
             out.push(Stream {
-                topic: g.topic.clone(),
-                message_type: "sensor_msgs/msg/JointState",
+                outputs: vec![(g.topic.clone(), JOINT_STATE)],
                 rate_hz: g.rate_hz,
                 latency_ms: (2.0, 2.0),
                 stamp_jitter_ms: 0.5,
@@ -142,8 +175,19 @@ pub(crate) fn streams(
             });
         }
     }
+    if let Some(tf) = rig.tf.as_ref().filter(|t| t.dynamic) {
+        out.push(Stream {
+            outputs: vec![(tf.topic.clone(), TF_MESSAGE)],
+            rate_hz: tf.rate_hz.unwrap_or(crate::tf::DEFAULT_TF_RATE_HZ),
+            latency_ms: (1.0, 1.0),
+            stamp_jitter_ms: 0.2,
+            kind: Kind::Tf,
+        });
+    }
     Ok(out)
 }
+
+const JOINT_STATE: &str = "sensor_msgs/msg/JointState";
 
 /// Frames a stream skipped because it fell behind real time, and the warning about it (at most
 /// one every five seconds, and only once more than 1 % of the frames went: a 1 kHz joint stream
@@ -183,16 +227,19 @@ fn sleep_until(ns: u64) {
 }
 
 impl Stream {
-    /// Publishes until the simulation stops; returns (topic, messages published).
+    /// Publishes until the simulation stops, output `j` on `publishers[j]`; returns (topic,
+    /// messages published) per output.
     pub(crate) fn run(
         mut self,
         mut ctx: StreamCtx,
-        publisher: zenoh::pubsub::Publisher<'static>,
-    ) -> (String, u64) {
+        publishers: Vec<zenoh::pubsub::Publisher<'static>>,
+    ) -> Vec<(String, u64)> {
         let period_ns = 1e9 / self.rate_hz;
         let mut image_buf = Vec::new();
-        // k: the capture slot on the stream's grid; seq: messages published.
+        let topic = self.outputs[0].0.clone();
+        // k: the capture slot on the stream's grid; seq: captures published.
         let (mut k, mut seq): (u64, u64) = (0, 0);
+        let mut sent = vec![0u64; self.outputs.len()];
         let mut lag = Lag::default();
         while !ctx.shared.stop.load(Ordering::Relaxed) {
             // A sensor that cannot keep up drops frames, as a real camera on a busy machine
@@ -203,7 +250,7 @@ impl Stream {
             let slot_ns = ctx.t0 + (k as f64 * period_ns) as u64;
             if ctx.realtime && now > slot_ns + period_ns as u64 {
                 let caught_up = ((now - ctx.t0) as f64 / period_ns).floor() as u64;
-                lag.skipped(&self.topic, caught_up - k, seq, self.rate_hz);
+                lag.skipped(&topic, caught_up - k, seq, self.rate_hz);
                 k = caught_up;
             }
             let jitter = ctx.rng.random_range(-1.0..=1.0) * self.stamp_jitter_ms * 1e6;
@@ -215,74 +262,107 @@ impl Stream {
             if ctx.shared.stop.load(Ordering::Relaxed) {
                 break;
             }
-            let payload = self.message(&ctx.shared, k, capture_ns, &mut image_buf);
+            let payloads = self.message(&ctx.shared, k, capture_ns, &mut image_buf);
             sleep_until(capture_ns + latency as u64);
             if ctx.shared.stop.load(Ordering::Relaxed) {
                 break;
             }
-            if let Some(hook) = &ctx.hook {
-                hook(&self.topic, &payload);
-            }
-            let put = publisher.put(payload);
-            let put = match &ctx.rmw {
-                Some(gid) => put.attachment(
-                    RmwAttachment {
-                        sequence_number: seq as i64 + 1,
-                        source_timestamp_ns: now_ns() as i64,
-                        source_gid: gid.clone(),
+            for (j, ((out_topic, _), payload)) in self.outputs.iter().zip(payloads).enumerate() {
+                if let Some(hook) = &ctx.hook {
+                    hook(out_topic, &payload);
+                }
+                let put = publishers[j].put(payload);
+                let put = match &ctx.rmw {
+                    Some(gid) => {
+                        // One gid per publisher: the stream's, its last byte told apart.
+                        let mut gid = gid.clone();
+                        if let Some(last) = gid.last_mut() {
+                            *last ^= j as u8;
+                        }
+                        put.attachment(
+                            RmwAttachment {
+                                sequence_number: sent[j] as i64 + 1,
+                                source_timestamp_ns: now_ns() as i64,
+                                source_gid: gid,
+                            }
+                            .to_zbytes(),
+                        )
                     }
-                    .to_zbytes(),
-                ),
-                None => put,
-            };
-            if let Err(e) = put.wait() {
-                tracing::warn!("{}: {e}", self.topic);
+                    None => put,
+                };
+                if let Err(e) = put.wait() {
+                    tracing::warn!("{out_topic}: {e}");
+                }
+                sent[j] += 1;
             }
             k += 1;
             seq += 1;
         }
-        (self.topic, seq)
+        self.outputs
+            .iter()
+            .map(|(t, _)| t.clone())
+            .zip(sent)
+            .collect()
     }
 
+    /// The payloads of one capture, one per output.
     fn message(
         &mut self,
         shared: &Shared,
         k: u64,
         capture_ns: u64,
         image_buf: &mut Vec<u8>,
-    ) -> Vec<u8> {
+    ) -> Vec<Vec<u8>> {
         match &mut self.kind {
             Kind::Camera {
                 view,
                 cam,
                 cache,
                 encoder,
+                depth,
+                infos,
             } => {
-                if cache.is_empty() {
-                    let state = shared.state();
-                    render::render(&shared.scene, view, &state, raw_encoding(cam), image_buf);
+                let state = (cache.is_empty() || depth.is_some()).then(|| shared.state());
+                match (&state, cache.is_empty()) {
+                    (Some(state), true) => {
+                        render::render(&shared.scene, view, state, raw_encoding(cam), image_buf)
+                    }
+                    _ => {
+                        image_buf.clear();
+                        image_buf.extend_from_slice(&cache[k as usize % cache.len()]);
+                    }
+                }
+                let color = if let Some(enc) = encoder {
+                    video_message(cam, enc, image_buf, capture_ns)
                 } else {
-                    image_buf.clear();
-                    image_buf.extend_from_slice(&cache[k as usize % cache.len()]);
+                    let image = messages::image(cam, std::mem::take(image_buf), capture_ns);
+                    let out = image.to_cdr();
+                    *image_buf = image.data; // reuse the pixel buffer for the next frame
+                    out
+                };
+                let mut out = vec![color];
+                if let (Some(sensor), Some(state)) = (depth.as_mut(), &state) {
+                    out.push(sensor.message(cam, &shared.scene, view, state, capture_ns));
                 }
-                if let Some(enc) = encoder {
-                    return video_message(cam, enc, image_buf, capture_ns);
+                for _ in 0..*infos {
+                    out.push(camera_info(cam, view, capture_ns).to_cdr());
                 }
-                let image = messages::image(cam, std::mem::take(image_buf), capture_ns);
-                let out = image.to_cdr();
-                *image_buf = image.data; // reuse the pixel buffer for the next frame
                 out
             }
             Kind::Arm { index, arm } => {
                 let s = shared.arm_state(*index);
-                messages::joint_state(arm, &s, capture_ns).to_cdr()
+                vec![messages::joint_state(arm, &s, capture_ns).to_cdr()]
             }
             Kind::Gripper { index, arm } => {
                 let width = shared.arm_state(*index).gripper_width_m;
-                match &arm.gripper {
+                vec![match &arm.gripper {
                     Some(g) => messages::gripper_state(g, width, capture_ns).to_cdr(),
                     None => Vec::new(),
-                }
+                }]
+            }
+            Kind::Tf => {
+                let state = shared.state();
+                vec![crate::tf::tf_dynamic(&shared.scene, &state, capture_ns).to_cdr()]
             }
         }
     }

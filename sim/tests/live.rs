@@ -10,7 +10,8 @@ use std::time::{Duration, Instant};
 use glam::{DMat4, DVec3};
 use scaledp_recorder::keys::{bridge_key, rmw_key, rmw_key_expr};
 use scaledp_recorder::net;
-use scaledp_schema::msg::{header_stamp, Image, JointState};
+use scaledp_schema::msg::{definition, header_stamp, Image, JointState, StampField};
+use scaledp_schema::rig::TopicKind;
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_sim::messages::{gripper_command, pose_command};
 use scaledp_sim::task::Task;
@@ -69,9 +70,14 @@ fn first_messages(rig: &Rig, seed: u64) -> BTreeMap<String, Vec<Vec<u8>>> {
         }))
         .spawn(&session)
         .unwrap();
+    // Every stream N messages; the latched /tf_static once, at startup.
     let full = || {
         let got = got.lock().unwrap();
-        got.len() == rig.topics().len() && got.values().all(|m| m.len() == N)
+        got.len() == rig.topics().len()
+            && rig
+                .topics()
+                .iter()
+                .all(|t| got[&t.topic].len() == if t.latched { 1 } else { N })
     };
     let ok = wait_until(60.0, full);
     sim.stop();
@@ -95,7 +101,9 @@ fn a_seed_fixes_the_live_streams_and_another_seed_changes_them() {
     let a = first_messages(&rig, 3);
     assert_eq!(a, first_messages(&rig, 3), "same seed, same messages");
     let other = first_messages(&rig, 4);
-    for t in rig.topics() {
+    // The rig's depth, camera_info and tf are seeded streams like the others.
+    assert!(rig.topics().iter().any(|t| t.kind == TopicKind::Depth));
+    for t in rig.topics().into_iter().filter(|t| !t.latched) {
         let (mine, theirs) = (&a[&t.topic], &other[&t.topic]);
         // Stamps on the rate's grid but for the seeded jitter (±0.5 ms for cameras and the
         // gripper, ±20 µs for the arm), which is not zero.
@@ -104,11 +112,17 @@ fn a_seed_fixes_the_live_streams_and_another_seed_changes_them() {
         } else {
             0.5e6
         };
-        let period = 1e9 / t.rate_hz;
-        let stamps: Vec<u64> = mine
-            .iter()
-            .map(|m| header_stamp(m).unwrap().as_ns())
-            .collect();
+        // A rig's [tf] without a rate: the simulator's own.
+        let rate = if t.rate_hz > 0.0 {
+            t.rate_hz
+        } else {
+            scaledp_sim::tf::DEFAULT_TF_RATE_HZ
+        };
+        let period = 1e9 / rate;
+        // Where the type keeps its stamp (a TFMessage: its first transform's header).
+        let field = StampField::of_definition(&definition(&t.message_type).unwrap());
+        let stamp = |m: &Vec<u8>| field.read(m).unwrap().as_ns();
+        let stamps: Vec<u64> = mine.iter().map(stamp).collect();
         for (k, s) in stamps.iter().enumerate() {
             let jitter = (s - T0) as f64 - k as f64 * period;
             assert!(jitter.abs() <= half_width + 1.0, "{}: {jitter} ns", t.topic);
@@ -119,12 +133,9 @@ fn a_seed_fixes_the_live_streams_and_another_seed_changes_them() {
             .filter(|(k, s)| ((**s - T0) as f64 - *k as f64 * period).abs() > 1.0)
             .count();
         assert!(off_grid > N / 2, "{}: no jitter", t.topic);
-        let their_stamps: Vec<u64> = theirs
-            .iter()
-            .map(|m| header_stamp(m).unwrap().as_ns())
-            .collect();
+        let their_stamps: Vec<u64> = theirs.iter().map(stamp).collect();
         assert_ne!(stamps, their_stamps, "{}: same jitter", t.topic);
-        if t.is_image {
+        if t.kind == TopicKind::Color {
             // Another seed puts the cube and the target elsewhere.
             let pixels = |m: &[Vec<u8>]| -> Vec<Vec<u8>> {
                 m.iter().map(|x| Image::from_cdr(x).unwrap().data).collect()
