@@ -327,7 +327,7 @@ impl SimOptions {
         session: &zenoh::Session,
         shared: &Shared,
         t0: u64,
-    ) -> Result<Option<LatchedPublisher>> {
+    ) -> Result<Option<Box<LatchedPublisher>>> {
         let Some(tf) = self.rig.tf.as_ref().filter(|t| t.static_) else {
             return Ok(None);
         };
@@ -357,7 +357,7 @@ impl SimOptions {
             .to_zbytes()
         });
         publisher.publish(payload, attachment);
-        Ok(Some(publisher))
+        Ok(Some(Box::new(publisher)))
     }
 }
 
@@ -367,7 +367,8 @@ pub struct Sim {
     threads: Vec<JoinHandle<Vec<(String, u64)>>>,
     workers: Vec<JoinHandle<()>>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
-    _tf_static: Option<LatchedPublisher>,
+    /// Boxed: an AdvancedPublisher is large, and a `Sim` is held by value.
+    _tf_static: Option<Box<LatchedPublisher>>,
 }
 
 impl Sim {

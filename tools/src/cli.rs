@@ -292,9 +292,49 @@ pub struct RecordArgs {
     /// a new one, or the one at URL (e.g. rerun+http://host:9876/proxy).
     #[arg(long, value_name = "URL", num_args = 0..=1)]
     pub view: Option<Option<String>>,
+    /// Also record topic NAME of type TYPE (pkg/msg/Name), verbatim. NAME may be a glob ('*'
+    /// one level, '**' any number, e.g. /robot/**): each matching topic gets a channel from
+    /// its first message. Without TYPE the type comes from the rmw_zenoh key or the bridge's
+    /// announcement (repeatable).
+    #[arg(long = "topic", value_name = "NAME[:TYPE]", value_parser = parse_topic_pattern)]
+    pub topics: Vec<scaledp_recorder::TopicPattern>,
+    /// Look up the definitions of types scaledp does not know as <DIR>/share/<pkg>/msg/<Name>.msg
+    /// or <DIR>/<pkg>/msg/<Name>.msg, after the prefixes of AMENT_PREFIX_PATH (repeatable).
+    #[arg(long, value_name = "DIR")]
+    pub msg_path: Vec<PathBuf>,
+    /// Record a rig topic under another name, as ROS remaps one: FROM:=TO, e.g.
+    /// /tf:=/robot1/tf (repeatable).
+    #[arg(long, value_name = "FROM:=TO", value_parser = parse_remap)]
+    pub remap: Vec<(String, String)>,
     /// Network settings; by default a peer connecting to tcp/127.0.0.1:7447.
     #[command(flatten)]
     pub net: NetArgs,
+}
+
+fn parse_topic_pattern(s: &str) -> Result<scaledp_recorder::TopicPattern, String> {
+    s.parse()
+}
+
+/// `FROM:=TO`, ROS's remapping syntax.
+fn parse_remap(s: &str) -> Result<(String, String), String> {
+    let (from, to) = s
+        .split_once(":=")
+        .ok_or("expected FROM:=TO, e.g. /tf:=/robot1/tf")?;
+    let name = |n: &str| {
+        let ok = !n.is_empty()
+            && !n.ends_with('/')
+            && n.trim_start_matches('/')
+                .split('/')
+                .all(|w| !w.is_empty() && w.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'));
+        if ok {
+            Ok(n.to_string())
+        } else {
+            Err(format!(
+                "'{n}' is not a ROS 2 topic name (letters, digits, '_', '/')"
+            ))
+        }
+    };
+    Ok((name(from)?, name(to)?))
 }
 
 /// `scaledp recover`.

@@ -6,16 +6,62 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use crossterm::event::{self, Event as TermEvent, KeyCode, KeyEvent, KeyModifiers};
-use scaledp_recorder::{Command, Label, Recorder, RecorderOptions};
+use scaledp_recorder::{Command, Label, Recorder, RecorderOptions, TopicPattern};
+use scaledp_schema::msg::MsgSearch;
+use scaledp_schema::rig::ExtraTopic;
 use scaledp_schema::Rig;
 
 use crate::cli::{ExitStatus, RecordArgs};
 use crate::shared::{self, drain, timed_episodes, wait_for_topics, Tally};
 use crate::ui::{topic_labels, StatusLine};
 
+/// The rig with `--remap` applied and every concrete `--topic NAME:TYPE` among its further
+/// topics (so the stored rig lists it); the `--topic` globs and untyped names left to match
+/// while recording.
+fn rig_and_patterns(args: &RecordArgs) -> Result<(Rig, Vec<TopicPattern>)> {
+    let mut rig = Rig::load_or_builtin(&args.rig)?;
+    for (from, to) in &args.remap {
+        rig.remap(from, to)?;
+    }
+    let mut patterns = Vec::new();
+    for p in &args.topics {
+        match (p.is_glob(), p.message_type()) {
+            (false, Some(ty)) => {
+                if rig.topics().iter().any(|t| t.topic == p.name()) {
+                    tracing::info!("--topic {p}: already a topic of rig {}", rig.name);
+                    continue;
+                }
+                rig.extra_topics.push(ExtraTopic {
+                    name: p.name().to_string(),
+                    message_type: ty.to_string(),
+                    rate_hz: None,
+                    latched: false,
+                });
+            }
+            _ => patterns.push(p.clone()),
+        }
+    }
+    Ok((rig, patterns))
+}
+
+/// Where definitions of unknown types are looked up: `AMENT_PREFIX_PATH`, then `--msg-path`.
+fn msg_search(args: &RecordArgs) -> Result<MsgSearch> {
+    let mut search =
+        MsgSearch::new().ament_prefix_path(&std::env::var("AMENT_PREFIX_PATH").unwrap_or_default());
+    for dir in &args.msg_path {
+        anyhow::ensure!(
+            dir.is_dir(),
+            "--msg-path {}: no such directory",
+            dir.display()
+        );
+        search = search.dir(dir);
+    }
+    Ok(search)
+}
+
 /// Runs `scaledp record`.
 pub fn run(args: RecordArgs) -> Result<ExitStatus> {
-    let rig = Rig::load_or_builtin(&args.rig)?;
+    let (rig, patterns) = rig_and_patterns(&args)?;
     let labels = topic_labels(&rig);
     let config = shared::zenoh_config(&args.net, &[])?;
     let operator = args
@@ -31,6 +77,10 @@ pub fn run(args: RecordArgs) -> Result<ExitStatus> {
         .queue_bytes(args.queue_mib << 20)
         .control_prefix(&args.control_prefix)
         .bridge_namespace(&args.namespace)
+        .msg_search(msg_search(&args)?);
+    let recorder = patterns
+        .into_iter()
+        .fold(recorder, RecorderOptions::topic_pattern)
         .start(config)?;
     if let Some(url) = &args.view {
         shared::viewer::live::start(&recorder, &rig, &args.namespace, url.as_deref())?;
