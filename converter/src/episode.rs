@@ -1,11 +1,10 @@
 //! One input → one training episode: aligned ticks, end-effector state and action per arm,
-//! joint positions, and resized JPEG frames per camera.
+//! joint positions, and per camera resized JPEG frames, depth and intrinsics (see
+//! [`crate::cameras`]).
 
-use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use rayon::prelude::*;
-use scaledp_codec::{EncodedVideo, VideoEncoder, VideoSettings};
+use scaledp_codec::VideoSettings;
 use scaledp_schema::rig::Rig;
 use scaledp_schema::ActionSpace;
 
@@ -13,26 +12,14 @@ pub use scaledp_schema::action::state_names;
 
 use crate::actions::command_actions;
 use crate::align::{align, Alignment, AlignmentReport, Stream};
+use crate::cameras::{camera_frames, camera_streams, Chosen};
+pub use crate::cameras::{CameraFrames, DepthFrames};
 use crate::error::{Error, Result};
 use crate::frames::FrameStore;
-use crate::images::{ChannelHistogram, EncodeSpec};
 use crate::kinematics::ArmKinematics;
 pub use crate::options::ConvertOptions;
-use crate::series::{messages_of, stamp_of, unwrap_pose_angles, JointSeries, Ordered};
+use crate::series::{messages_of, unwrap_pose_angles, JointSeries};
 use crate::source::Recording;
-
-/// One camera's frames of an episode.
-#[derive(Debug, Clone)]
-pub struct CameraFrames {
-    /// Camera name (feature `observation.images.<name>`).
-    pub name: String,
-    /// JPEG bytes per frame (empty when the camera is stored as video).
-    pub jpeg: Vec<Vec<u8>>,
-    /// The frames encoded as one video stream, for a dataset of video features.
-    pub video: Option<EncodedVideo>,
-    /// Pixel statistics over the resized frames.
-    pub histogram: ChannelHistogram,
-}
 
 /// A converted episode, ready to be written.
 #[derive(Debug, Clone)]
@@ -112,55 +99,6 @@ fn rig_and_task(path: &Path, rec: &Recording, opts: &ConvertOptions) -> Result<(
             reason: "no task instruction: the recording stores none; pass --task".into(),
         })?;
     Ok((rig, fps, task))
-}
-
-/// A camera's frames in stamp order: the stream aligned on, and each frame's stored ordinal.
-struct CameraStream {
-    stream: Stream,
-    ordinals: Vec<usize>,
-    reordered: usize,
-}
-
-/// Every camera's frame stamps (only those logged inside the window), put in stamp order.
-fn camera_streams(
-    path: &Path,
-    rig: &Rig,
-    frames: &dyn FrameStore,
-    opts: &ConvertOptions,
-) -> Result<Vec<CameraStream>> {
-    let mut out = Vec::with_capacity(rig.cameras.len());
-    for c in &rig.cameras {
-        let (ordinals, stamps): (Vec<usize>, Vec<u64>) = frames
-            .stamps(&c.topic)
-            .into_iter()
-            .enumerate()
-            .filter(|(_, (_, log))| opts.in_window(*log))
-            .map(|(i, (header, log))| (i, stamp_of(header, log, opts)))
-            .unzip();
-        if stamps.is_empty() {
-            return Err(Error::Rejected {
-                path: path.into(),
-                reason: match c.video_codec() {
-                    Some(codec) => format!(
-                        "camera '{}' ({}) has no {codec} frame that decodes",
-                        c.name, c.topic
-                    ),
-                    None => format!("camera '{}' ({}) has no messages", c.name, c.topic),
-                },
-            });
-        }
-        let ordered = Ordered::new(path, &c.topic, &stamps, opts.reorder_window_ns())?;
-        out.push(CameraStream {
-            stream: Stream::new(
-                &c.topic,
-                ordered.order.iter().map(|&k| stamps[k]).collect(),
-                Some(c.fps),
-            ),
-            ordinals: ordered.order.iter().map(|&k| ordinals[k]).collect(),
-            reordered: ordered.reordered,
-        });
-    }
-    Ok(out)
 }
 
 /// The joint series of every arm and its gripper (in that order, arms in rig order) and each
@@ -277,75 +215,6 @@ fn tick_states(
     })
 }
 
-/// Each camera's chosen frame at each of the first `frames` ticks: decoded, resized and
-/// JPEG-encoded once (in parallel), with the episode's pixel statistics; or, with `video`, the
-/// resized frames of each camera encoded as one stream (the cameras in parallel).
-#[allow(clippy::too_many_arguments)]
-fn camera_frames(
-    path: &Path,
-    rig: &Rig,
-    store: &dyn FrameStore,
-    cams: &[CameraStream],
-    aligned: &Alignment,
-    frames: usize,
-    spec: &EncodeSpec,
-    video: Option<VideoSettings>,
-) -> Result<Vec<CameraFrames>> {
-    let mut wanted: BTreeMap<String, BTreeSet<usize>> = BTreeMap::new();
-    for (ci, cam) in rig.cameras.iter().enumerate() {
-        wanted.entry(cam.topic.clone()).or_default().extend(
-            aligned.frames[..frames]
-                .iter()
-                .map(|f| cams[ci].ordinals[f[ci]]),
-        );
-    }
-    let done = store.encode(path, &wanted, spec)?;
-    let one = |ci: usize| -> Result<CameraFrames> {
-        let cam = &rig.cameras[ci];
-        let mut histogram = ChannelHistogram::default();
-        let mut picked = Vec::with_capacity(frames);
-        for f in &aligned.frames[..frames] {
-            let ordinal = cams[ci].ordinals[f[ci]];
-            let e = done
-                .get(&(cam.topic.clone(), ordinal))
-                .ok_or_else(|| Error::Rejected {
-                    path: path.into(),
-                    reason: format!(
-                        "frame {ordinal} of {} was not found on the second read",
-                        cam.topic
-                    ),
-                })?;
-            histogram.absorb(&e.histogram);
-            picked.push(&e.bytes);
-        }
-        let (jpeg, video) = match video {
-            None => (picked.into_iter().cloned().collect(), None),
-            Some(settings) => {
-                let failed = |e: scaledp_codec::EncodeError| Error::Rejected {
-                    path: path.into(),
-                    reason: format!("camera '{}': {e}", cam.name),
-                };
-                let mut enc =
-                    VideoEncoder::new(settings, spec.width, spec.height).map_err(failed)?;
-                for rgb in picked {
-                    enc.push_rgb(rgb).map_err(failed)?;
-                }
-                (Vec::new(), Some(enc.finish().map_err(failed)?))
-            }
-        };
-        Ok(CameraFrames {
-            name: cam.name.clone(),
-            jpeg,
-            video,
-            histogram,
-        })
-    };
-    // Encoded in parallel, but the error reported is the first camera's in rig order, so the
-    // same bad input always reads the same way.
-    let each: Vec<Result<CameraFrames>> = (0..rig.cameras.len()).into_par_iter().map(one).collect();
-    each.into_iter().collect()
-}
-
 /// Converts one recording: picks the rig, aligns the camera and joint streams on a tick grid,
 /// computes state (TCP poses by forward kinematics) and action per tick, and encodes the
 /// frames chosen.
@@ -359,7 +228,8 @@ pub fn convert(
     // Cameras: stamps only; pixels later, for the frames chosen.
     let cams = camera_streams(path, &rig, frames_store, opts)?;
     let (series, kin) = arm_series(path, &rig, rec, opts)?;
-    let cam_streams: Vec<Stream> = cams.iter().map(|c| c.stream.clone()).collect();
+    // Depth is aligned as one more camera: the same frame rule, its own staleness.
+    let cam_streams: Vec<Stream> = cams.all().map(|c| c.stream.clone()).collect();
     let joint_streams: Vec<Stream> = series.iter().map(|s| s.stream.clone()).collect();
     let mut aligned = align(
         &cam_streams,
@@ -372,7 +242,7 @@ pub fn convert(
         path: path.into(),
         reason,
     })?;
-    let reordered = cams.iter().map(|c| c.reordered);
+    let reordered = cams.all().map(|c| c.reordered);
     let reordered = reordered.chain(series.iter().map(|s| s.reordered));
     for (report, n) in aligned.report.streams.iter_mut().zip(reordered) {
         report.reordered = n;
@@ -414,16 +284,14 @@ pub fn convert(
 
     let spec = opts.encode_spec();
     let video = opts.video.map(|codec| VideoSettings::lerobot(codec, fps));
-    let cameras = camera_frames(
-        path,
-        &rig,
-        frames_store,
-        &cams,
-        &aligned,
+    let chosen = Chosen {
+        streams: &cams,
+        aligned: &aligned,
         frames,
-        &spec,
+        spec: &spec,
         video,
-    )?;
+    };
+    let cameras = camera_frames(path, &rig, rec, frames_store, &chosen, opts)?;
     let joint_names = rig
         .arms
         .iter()

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use fast_image_resize as fr;
 use scaledp_schema::msg::Header;
+use scaledp_schema::rig::DepthEncoding;
 use scaledp_schema::{CdrReader, RosMessage};
 
 use crate::decode::Frame;
@@ -86,13 +87,30 @@ pub struct EncodeSpec {
 }
 
 /// A camera frame resized and JPEG-encoded (or kept as RGB, see [`EncodeSpec::raw`]), with the
-/// histogram of its resized pixels.
+/// histogram of its resized pixels; or a depth image (see [`crate::depth`]), its values resized
+/// by nearest neighbour.
 #[derive(Debug, Clone)]
 pub struct EncodedFrame {
-    /// JPEG bytes, or packed RGB8 rows when the spec asks for raw pixels.
+    /// JPEG bytes, or packed RGB8 rows when the spec asks for raw pixels; for a depth image its
+    /// values, little-endian (`u16` millimetres or `f32` metres).
     pub bytes: Vec<u8>,
-    /// Pixel statistics of the resized frame.
+    /// Pixel statistics of the resized frame (empty for depth).
     pub histogram: ChannelHistogram,
+    /// The image as the message held it, before resizing.
+    pub source: SourceImage,
+    /// The depth encoding, for a depth image (`16UC1` / `32FC1` raw or `compressedDepth`).
+    pub depth: Option<DepthEncoding>,
+}
+
+/// A frame's image as its message held it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SourceImage {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// A raw image's `encoding` (`bgra8`, `16UC1`, …) or a compressed one's `format`.
+    pub encoding: String,
 }
 
 /// A raw image borrowed from its message (`sensor_msgs/Image` fields, pixels not copied).
@@ -242,7 +260,7 @@ pub fn resized_rgb(img: &ImageView<'_>, width: u32, height: u32) -> ImageResult<
 }
 
 /// Resized RGB → JPEG (or the pixels themselves) and histogram.
-fn finish(small: Rgb, spec: &EncodeSpec) -> ImageResult<EncodedFrame> {
+fn finish(small: Rgb, spec: &EncodeSpec, source: SourceImage) -> ImageResult<EncodedFrame> {
     let mut histogram = ChannelHistogram::default();
     histogram.add(&small);
     let bytes = if spec.raw {
@@ -250,11 +268,32 @@ fn finish(small: Rgb, spec: &EncodeSpec) -> ImageResult<EncodedFrame> {
     } else {
         jpeg(&small, spec.quality)?
     };
-    Ok(EncodedFrame { bytes, histogram })
+    Ok(EncodedFrame {
+        bytes,
+        histogram,
+        source,
+        depth: None,
+    })
+}
+
+/// A depth image resized by nearest neighbour to the spec's size, as stored.
+fn finish_depth(d: &crate::depth::DepthImage, encoding: String, spec: &EncodeSpec) -> EncodedFrame {
+    EncodedFrame {
+        bytes: d.resized(spec.width, spec.height).to_le_bytes(),
+        histogram: ChannelHistogram::default(),
+        source: SourceImage {
+            width: d.width,
+            height: d.height,
+            encoding,
+        },
+        depth: Some(d.encoding()),
+    }
 }
 
 /// One camera message of `path` (raw or compressed, either serialization) → resized JPEG and
 /// histogram. CDR raw images are read in place; others are decoded through [`crate::decode`].
+/// A depth image (raw `16UC1` / `32FC1`, or `compressedDepth`) becomes its values instead,
+/// resized by nearest neighbour (see [`crate::depth`]).
 pub fn encode_message(
     path: &Path,
     topic: &str,
@@ -270,11 +309,27 @@ pub fn encode_message(
         log_time_ns,
         reason: e.to_string(),
     };
+    let message_err = |reason: String| Error::Message {
+        path: path.into(),
+        topic: topic.into(),
+        log_time_ns,
+        reason,
+    };
     let compressed = message_type.ends_with("/CompressedImage");
     if serialization == Serialization::Cdr && !compressed {
         let view = ImageView::from_cdr(data).map_err(err)?;
+        if crate::depth::raw_depth_encoding(view.encoding).is_some() {
+            let raw = crate::depth::RawDepth::from_cdr(data).map_err(message_err)?;
+            let d = raw.decode().map_err(message_err)?;
+            return Ok(finish_depth(&d, view.encoding.to_string(), spec));
+        }
         let small = resized_rgb(&view, spec.width, spec.height).map_err(err)?;
-        return finish(small, spec).map_err(err);
+        let source = SourceImage {
+            width: view.width,
+            height: view.height,
+            encoding: view.encoding.to_string(),
+        };
+        return finish(small, spec, source).map_err(err);
     }
     let m = RawMessage {
         topic: topic.into(),
@@ -284,9 +339,39 @@ pub fn encode_message(
         serialization,
     };
     let f = crate::decode::frame(path, &m)?;
+    match &f {
+        Frame::Raw(img) if crate::depth::raw_depth_encoding(&img.encoding).is_some() => {
+            let raw = crate::depth::RawDepth {
+                width: img.width,
+                height: img.height,
+                encoding: &img.encoding,
+                is_bigendian: img.is_bigendian,
+                step: img.step,
+                data: &img.data,
+            };
+            let d = raw.decode().map_err(message_err)?;
+            return Ok(finish_depth(&d, img.encoding.clone(), spec));
+        }
+        Frame::Compressed(c) if crate::depth::is_compressed_depth(&c.format) => {
+            let d =
+                crate::depth::decode_compressed_depth(&c.format, &c.data).map_err(message_err)?;
+            let encoding = c.format.split(';').next().unwrap_or_default().trim();
+            return Ok(finish_depth(&d, encoding.to_string(), spec));
+        }
+        _ => {}
+    }
+    let source_encoding = match &f {
+        Frame::Raw(img) => img.encoding.clone(),
+        Frame::Compressed(c) => c.format.clone(),
+    };
     let rgb = to_rgb(&f).map_err(err)?;
+    let source = SourceImage {
+        width: rgb.width,
+        height: rgb.height,
+        encoding: source_encoding,
+    };
     let small = resize(&rgb, spec.width, spec.height).map_err(err)?;
-    finish(small, spec).map_err(err)
+    finish(small, spec, source).map_err(err)
 }
 
 /// Tightly packed RGB8 pixels.
@@ -383,79 +468,4 @@ pub fn jpeg(src: &Rgb, quality: u8) -> ImageResult<Vec<u8>> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use scaledp_schema::msg::Image;
-
-    fn raw(encoding: &str, w: u32, h: u32, step: u32, data: Vec<u8>) -> Frame {
-        Frame::Raw(Image {
-            encoding: encoding.into(),
-            width: w,
-            height: h,
-            step,
-            data,
-            ..Default::default()
-        })
-    }
-
-    #[test]
-    fn encodings_and_step_are_honoured() {
-        // 2×2 bgra8 with 4 bytes of padding per row.
-        let data = vec![
-            1, 2, 3, 255, 4, 5, 6, 255, 0, 0, 0, 0, 7, 8, 9, 255, 10, 11, 12, 255, 0, 0, 0, 0,
-        ];
-        let rgb = to_rgb(&raw("bgra8", 2, 2, 12, data)).unwrap();
-        assert_eq!(rgb.data, vec![3, 2, 1, 6, 5, 4, 9, 8, 7, 12, 11, 10]);
-        let mono = to_rgb(&raw("mono8", 2, 1, 2, vec![5, 6])).unwrap();
-        assert_eq!(mono.data, vec![5, 5, 5, 6, 6, 6]);
-        let e = |f: Frame| to_rgb(&f).unwrap_err().to_string();
-        assert!(e(raw("rgb8", 2, 2, 5, vec![0; 12])).contains("step 5"));
-        assert!(e(raw("rgb8", 2, 2, 6, vec![0; 11])).contains("need 12"));
-        assert!(matches!(
-            to_rgb(&raw("16UC1", 2, 2, 4, vec![0; 8])),
-            Err(ImageError::Encoding(enc)) if enc == "16UC1"
-        ));
-    }
-
-    #[test]
-    fn resize_and_jpeg_round_trip() {
-        let src = Rgb {
-            width: 64,
-            height: 48,
-            data: (0..64 * 48 * 3).map(|i| (i % 251) as u8).collect(),
-        };
-        let small = resize(&src, 32, 24).unwrap();
-        assert_eq!(small.data.len(), 32 * 24 * 3);
-        let bytes = jpeg(&small, 90).unwrap();
-        let back = image::load_from_memory(&bytes).unwrap().to_rgb8();
-        assert_eq!((back.width(), back.height()), (32, 24));
-    }
-
-    #[test]
-    fn fused_resize_matches_rgb_then_resize() {
-        // bgra8 and rgb8 frames resized as stored equal conversion to RGB then resizing with
-        // the library's own Lanczos3, bit for bit (cached filter and alpha left alone).
-        let (w, h) = (257u32, 131u32);
-        let px: Vec<u8> = (0..w * h * 4)
-            .map(|i| ((i * 7919) % 251) as u8 ^ (i / 1031) as u8)
-            .collect();
-        for (enc, ch) in [("bgra8", 4), ("rgba8", 4), ("bgr8", 3), ("rgb8", 3)] {
-            let data = &px[..(w * h * ch) as usize];
-            let view = ImageView {
-                width: w,
-                height: h,
-                encoding: enc,
-                step: w * ch,
-                data,
-            };
-            let fused = resized_rgb(&view, 64, 37).unwrap();
-            let rgb = view_to_rgb(&view).unwrap();
-            let from = fr::images::ImageRef::new(w, h, &rgb.data, fr::PixelType::U8x3).unwrap();
-            let mut to = fr::images::Image::new(64, 37, fr::PixelType::U8x3);
-            let options = fr::ResizeOptions::new()
-                .resize_alg(fr::ResizeAlg::Convolution(fr::FilterType::Lanczos3));
-            fr::Resizer::new().resize(&from, &mut to, &options).unwrap();
-            assert_eq!(fused.data, to.buffer(), "{enc}");
-        }
-    }
-}
+mod tests;

@@ -29,7 +29,10 @@ mod actions;
 /// The alignment rules (their own crate: the recorder's verdict applies the same ones).
 pub use scaledp_align as align;
 mod batch;
+mod camera_info;
+mod cameras;
 mod decode;
+pub mod depth;
 mod destination;
 mod detect;
 mod encode_pool;
@@ -69,12 +72,13 @@ mod video;
 
 pub use align::{align, Alignment, AlignmentReport, Stream, StreamReport};
 pub use batch::{run, run_inputs, InputResult, Progress};
-pub use episode::{convert, state_names, CameraFrames, Episode};
+pub use camera_info::Intrinsics;
+pub use episode::{convert, state_names, CameraFrames, DepthFrames, Episode};
 pub use error::{Error, Result};
 pub use floor::{floor, FloorReport};
 pub use frames::{FrameKey, FrameStore, InMemory};
 pub use inputs::{collect_inputs, content_hash, read_input, shard};
-pub use lerobot::{EpisodeRecord, Sidecar};
+pub use lerobot::{CameraIntrinsics, DepthFeature, EpisodeRecord, Sidecar};
 pub use mcap_source::read_mcap;
 pub use merge::{merge, merge_datasets, MergeOptions, MergeSummary};
 pub use objects::{collect, Input, ObjectInput};

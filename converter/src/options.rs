@@ -12,7 +12,8 @@ use scaledp_codec::Codec;
 /// How to convert one input, set with chained setters. Defaults: the rig given, else the one
 /// stored in the recording, else one detected; the rig's control rate; 320×240 JPEG at quality
 /// 90; a frame staler than 1.5 of its periods invalidates a tick; at most 5 % invalid ticks;
-/// header stamps as time; messages up to 0.1 s out of stamp order put back in order.
+/// header stamps as time; messages up to 0.1 s out of stamp order put back in order; depth
+/// kept where the rig has it.
 ///
 /// ```
 /// use scaledp_converter::ConvertOptions;
@@ -73,6 +74,9 @@ pub struct ConvertOptions {
     /// The space of `observation.state` and `action`.
     #[doc(hidden)]
     pub action_space: ActionSpace,
+    /// Keep the depth of cameras the rig gives a depth topic.
+    #[doc(hidden)]
+    pub depth: bool,
 }
 
 impl ConvertOptions {
@@ -144,6 +148,12 @@ impl ConvertOptions {
         self.action_space = space;
         self
     }
+    /// Keeps each camera's registered depth, when the rig gives it a depth topic, as the
+    /// feature `observation.depth.<camera>` (default true; false leaves depth out).
+    pub fn depth(mut self, yes: bool) -> Self {
+        self.depth = yes;
+        self
+    }
     /// Whether a message logged at `log_ns` is inside the window converted.
     pub(crate) fn in_window(&self, log_ns: u64) -> bool {
         self.window_ns.is_none_or(|(a, b)| (a..b).contains(&log_ns))
@@ -180,6 +190,7 @@ impl Default for ConvertOptions {
             reorder_window_s: 0.1,
             video: None,
             action_space: ActionSpace::Tcp,
+            depth: true,
         }
     }
 }

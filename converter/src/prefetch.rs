@@ -106,8 +106,12 @@ impl Selector {
                 return State::Off;
             }
             min_camera_period_s = min_camera_period_s.min(1.0 / c.fps);
-            streams.insert(c.topic.clone());
-            cameras.insert(c.topic.clone(), Camera::default());
+            // Kept depth is aligned as one more camera, so it moves the first tick too.
+            let depth = c.depth.as_ref().filter(|_| opts.depth).map(|d| &d.topic);
+            for topic in std::iter::once(&c.topic).chain(depth) {
+                streams.insert(topic.clone());
+                cameras.insert(topic.clone(), Camera::default());
+            }
         }
         for a in &rig.arms {
             streams.insert(a.joint_state_topic.clone());

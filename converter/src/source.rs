@@ -50,7 +50,8 @@ pub struct Recording {
     pub metadata: BTreeMap<String, BTreeMap<String, String>>,
 }
 
-/// Whether the converter reads messages of this type (cameras, joint states, pose commands):
+/// Whether the converter reads messages of this type (cameras, joint states, pose commands,
+/// camera intrinsics):
 /// a channel of one must be `cdr`-encoded.
 pub(crate) fn is_read(message_type: &str) -> bool {
     matches!(
@@ -60,6 +61,7 @@ pub(crate) fn is_read(message_type: &str) -> bool {
             | "foxglove_msgs/msg/CompressedVideo"
             | "sensor_msgs/msg/JointState"
             | "geometry_msgs/msg/PoseStamped"
+            | "sensor_msgs/msg/CameraInfo"
     )
 }
 

@@ -397,6 +397,9 @@ pub struct ConvertArgs {
     /// arm's JointState commands as the action: ALOHA's and LeRobot's convention).
     #[arg(long = "action", default_value = "tcp", value_parser = parse_action_space)]
     pub action_space: scaledp_schema::ActionSpace,
+    /// Leave out the depth of cameras the rig gives a depth topic (observation.depth.<camera>).
+    #[arg(long)]
+    pub no_depth: bool,
     /// Task instruction for inputs that store none (bags).
     #[arg(long)]
     pub task: Option<String>,

@@ -338,9 +338,13 @@ impl Drop for Viewer {
 }
 
 /// The converter's defaults, except that an episode without a task or with many invalid ticks
-/// is still shown (the viewer reports what the converter would reject instead).
+/// is still shown (the viewer reports what the converter would reject instead), and depth is
+/// left out of its state and action view (depth frames are shown as recorded).
 fn viewing_options() -> ConvertOptions {
-    ConvertOptions::default().task("").max_invalid_fraction(1.0)
+    ConvertOptions::default()
+        .task("")
+        .max_invalid_fraction(1.0)
+        .depth(false)
 }
 
 /// The rig the converter would detect in a bag (for entity names), if any.

@@ -69,6 +69,8 @@ impl FrameStore for NoPixels {
                     EncodedFrame {
                         bytes: Vec::new(),
                         histogram: ChannelHistogram::default(),
+                        source: Default::default(),
+                        depth: None,
                     },
                 )
             })

@@ -169,6 +169,15 @@ fn writer_properties(schema: &Schema) -> WriterProperties {
         .set_data_page_size_limit(PAGE_BYTES)
         .set_write_batch_size(1);
     for f in schema.fields() {
+        // Depth values (`list<list<…>>`): up to 65 536 distinct values per page, which a
+        // dictionary only slows down before falling back to plain.
+        if let DataType::List(rows) = f.data_type() {
+            if matches!(rows.data_type(), DataType::List(_)) {
+                let leaf = [f.name().as_str(), "list", "element", "list", "element"];
+                let col = ColumnPath::new(leaf.iter().map(|s| s.to_string()).collect());
+                b = b.set_column_dictionary_enabled(col, false);
+            }
+        }
         if let DataType::Struct(children) = f.data_type() {
             if children.iter().any(|c| c.name() == "bytes") {
                 let col = ColumnPath::new(vec![f.name().clone(), "bytes".into()]);

@@ -13,8 +13,23 @@ impl Dataset {
             return Ok(());
         };
         let cams: Vec<String> = ep.cameras.iter().map(|c| c.name.clone()).collect();
+        let depth = super::depth::depth_features(ep);
         let mismatch = if s.cameras != cams {
             Some(format!("cameras {cams:?}, the dataset has {:?}", s.cameras))
+        } else if s.depth != depth {
+            let list = |d: &[super::depth::DepthFeature]| {
+                let v: Vec<String> = d
+                    .iter()
+                    .map(|d| format!("{} {}", d.camera, d.encoding.as_str()))
+                    .collect();
+                format!("[{}]", v.join(", "))
+            };
+            Some(format!(
+                "depth of cameras {}, the dataset has {} (convert with or without --no-depth \
+                 as the dataset was)",
+                list(&depth),
+                list(&s.depth)
+            ))
         } else if s.action_space != ep.action_space {
             Some(format!(
                 "{} state and action, the dataset's are {} (convert with --action {})",
@@ -71,4 +86,64 @@ impl Dataset {
 
 fn stored_as(v: Option<&VideoFormat>) -> String {
     v.map_or("JPEG images".into(), |v| format!("{} video", v.codec))
+}
+
+impl Dataset {
+    /// An episode's arrays must have the shapes its names announce: a bug upstream (or an
+    /// episode built by hand) is refused here, for this input, instead of failing the column
+    /// writer with a message about arrays.
+    pub(super) fn check_shapes(ep: &Episode) -> Result<()> {
+        let n = ep.len();
+        let (dim, joints) = (ep.state_names.len(), ep.joint_names.len());
+        let wrong = if n == 0 {
+            Some("no frames".to_string())
+        } else if dim == 0 {
+            Some("no state dimensions (no arm)".into())
+        } else if ep.state.len() != n * dim || ep.action.len() != n * dim {
+            Some(format!(
+                "{} state and {} action values for {n} frames of {dim} dimensions",
+                ep.state.len(),
+                ep.action.len()
+            ))
+        } else if ep.joints.len() != n * joints {
+            Some(format!(
+                "{} joint values for {n} frames of {joints} joints",
+                ep.joints.len()
+            ))
+        } else {
+            let frames = |c: &crate::episode::CameraFrames| match &c.video {
+                Some(v) => v.samples.len(),
+                None => c.jpeg.len(),
+            };
+            let depth_wrong = |c: &crate::episode::CameraFrames| {
+                let d = c.depth.as_ref()?;
+                let want = super::depth::frame_bytes(d.encoding, ep.image_size);
+                (d.frames.len() != n || d.frames.iter().any(|f| f.len() != want)).then(|| {
+                    format!(
+                        "depth of camera '{}' has {} frames (of {want} bytes each?), the episode {n}",
+                        c.name,
+                        d.frames.len()
+                    )
+                })
+            };
+            ep.cameras
+                .iter()
+                .find(|c| frames(c) != n)
+                .map(|c| {
+                    format!(
+                        "camera '{}' has {} frames, the episode {n}",
+                        c.name,
+                        frames(c)
+                    )
+                })
+                .or_else(|| ep.cameras.iter().find_map(depth_wrong))
+        };
+        match wrong {
+            Some(why) => Err(Error::Rejected {
+                path: ep.source.clone(),
+                reason: format!("malformed episode: {why}"),
+            }),
+            None => Ok(()),
+        }
+    }
 }

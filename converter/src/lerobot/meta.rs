@@ -8,6 +8,7 @@ use scaledp_schema::ActionSpace;
 use serde::{Deserialize, Serialize};
 
 use super::columns::{self as col, stage, stage_parquet, Staged};
+use super::depth::{CameraIntrinsics, DepthFeature};
 use super::videos::{VideoFormat, VideoSpan, VIDEO_FILE_SIZE_MB};
 use crate::align::AlignmentReport;
 use crate::error::{Error, Result};
@@ -48,6 +49,10 @@ pub struct EpisodeRecord {
     /// Where its frames are in the camera videos (datasets of video features).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub video: Option<VideoSpan>,
+    /// Per camera, the intrinsics its camera_info gave in this episode (cameras without any
+    /// left out).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub intrinsics: BTreeMap<String, CameraIntrinsics>,
 }
 
 /// Everything needed to rebuild the LeRobot meta files, and to resume or merge.
@@ -71,6 +76,9 @@ pub struct Sidecar {
     pub video: Option<VideoFormat>,
     /// Camera names, in column order.
     pub cameras: Vec<String>,
+    /// The cameras whose depth is stored (`observation.depth.<camera>`), in camera order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub depth: Vec<DepthFeature>,
     /// Names of state / action dimensions.
     pub state_names: Vec<String>,
     /// Their space (absent in datasets written before joint space: TCP poses).
@@ -102,6 +110,7 @@ pub fn feature_names(s: &Sidecar) -> Vec<String> {
         .iter()
         .map(|c| format!("observation.images.{c}"))
         .collect();
+    v.extend(s.depth.iter().map(DepthFeature::key));
     for f in [
         "observation.state",
         "action",
@@ -137,6 +146,7 @@ fn features_json(s: &Sidecar) -> serde_json::Value {
         }
         m.insert(format!("observation.images.{c}"), f);
     }
+    super::depth::features(&s.depth, s.image_size, &mut m);
     let vector = |names: &[String]| serde_json::json!({"dtype": "float32", "shape": [names.len()], "names": names});
     m.insert("observation.state".into(), vector(&s.state_names));
     m.insert("action".into(), vector(&s.state_names));
@@ -163,6 +173,7 @@ pub fn huggingface_metadata(s: &Sidecar) -> String {
             serde_json::json!({"_type": "Image"}),
         );
     }
+    super::depth::hf_features(&s.depth, s.image_size, &mut f);
     let list = |n: usize| serde_json::json!({"feature": {"dtype": "float32", "_type": "Value"}, "length": n, "_type": "List"});
     f.insert("observation.state".into(), list(s.state_names.len()));
     f.insert("action".into(), list(s.state_names.len()));
@@ -202,6 +213,11 @@ pub fn stage_all(
         staged,
     )?;
     let total_frames: u64 = s.episodes.iter().map(|e| e.length).sum();
+    let intrinsics: Vec<_> = s
+        .episodes
+        .iter()
+        .map(|e| (e.episode_index, &e.intrinsics))
+        .collect();
     let info = serde_json::json!({
         "codebase_version": "v3.0",
         "robot_type": s.robot_type,
@@ -225,6 +241,7 @@ pub fn stage_all(
             "video": s.video,
             "action_space": s.action_space.name(),
             "action": s.action_space.describe(),
+            "cameras": super::depth::cameras_json(&s.cameras, &s.depth, &intrinsics),
             "kinematics": "built-in DH models (fr3/panda: modified DH, pose of the Franka Hand TCP — flange + 0.1034 m along z, −45° about z — in fr3_link0; ur5/ur5e: standard DH, pose of tool0 in the DH base frame) unless the rig names a URDF chain or a TCP offset",
             "time_alignment": "ticks at fps on header.stamp capture times, starting a quarter frame period after the latest camera's first frame so synchronised cameras pick the same capture; latest camera frame at or before each tick; joints linearly interpolated",
             "sources": s.episodes.iter().map(|e| serde_json::json!({"episode_index": e.episode_index, "source": e.source, "blake3": e.source_hash})).collect::<Vec<_>>(),

@@ -8,6 +8,7 @@
 //! A data file is closed once it reaches the size target; the next episode starts a new one.
 
 mod columns;
+mod depth;
 mod layout;
 mod meta;
 mod repair;
@@ -19,6 +20,7 @@ use std::path::{Path, PathBuf};
 use arrow_array::{ArrayRef, RecordBatch};
 use scaledp_codec::EncodedVideo;
 
+pub use depth::{CameraIntrinsics, DepthFeature};
 pub use meta::{data_path, EpisodeRecord, Sidecar};
 use repair::read_row_group;
 use videos::VideoTail;
@@ -35,6 +37,7 @@ struct Provenance {
     source_etag: Option<String>,
     report: crate::align::AlignmentReport,
     time_source: String,
+    intrinsics: BTreeMap<String, CameraIntrinsics>,
 }
 
 /// The open data file and the episodes (row groups) it holds.
@@ -148,49 +151,6 @@ impl Dataset {
         self.episodes().iter().any(|e| e.source_hash == source_hash)
     }
 
-    /// An episode's arrays must have the shapes its names announce: a bug upstream (or an
-    /// episode built by hand) is refused here, for this input, instead of failing the column
-    /// writer with a message about arrays.
-    fn check_shapes(ep: &Episode) -> Result<()> {
-        let n = ep.len();
-        let (dim, joints) = (ep.state_names.len(), ep.joint_names.len());
-        let wrong = if n == 0 {
-            Some("no frames".to_string())
-        } else if dim == 0 {
-            Some("no state dimensions (no arm)".into())
-        } else if ep.state.len() != n * dim || ep.action.len() != n * dim {
-            Some(format!(
-                "{} state and {} action values for {n} frames of {dim} dimensions",
-                ep.state.len(),
-                ep.action.len()
-            ))
-        } else if ep.joints.len() != n * joints {
-            Some(format!(
-                "{} joint values for {n} frames of {joints} joints",
-                ep.joints.len()
-            ))
-        } else {
-            let frames = |c: &crate::episode::CameraFrames| match &c.video {
-                Some(v) => v.samples.len(),
-                None => c.jpeg.len(),
-            };
-            ep.cameras.iter().find(|c| frames(c) != n).map(|c| {
-                format!(
-                    "camera '{}' has {} frames, the episode {n}",
-                    c.name,
-                    frames(c)
-                )
-            })
-        };
-        match wrong {
-            Some(why) => Err(Error::Rejected {
-                path: ep.source.clone(),
-                reason: format!("malformed episode: {why}"),
-            }),
-            None => Ok(()),
-        }
-    }
-
     /// Appends a converted episode and commits it: `source_hash` is its input's content hash,
     /// `source_etag` the object version it was read from, if it came from object storage.
     pub fn add(
@@ -211,6 +171,7 @@ impl Dataset {
                 jpeg_quality: ep.video.is_none().then_some(ep.jpeg_quality),
                 video: ep.video.as_ref().map(VideoFormat::of),
                 cameras: ep.cameras.iter().map(|c| c.name.clone()).collect(),
+                depth: depth::depth_features(ep),
                 state_names: ep.state_names.clone(),
                 action_space: ep.action_space,
                 joint_names: ep.joint_names.clone(),
@@ -231,6 +192,13 @@ impl Dataset {
                 )
             })
             .collect();
+        let (w, h) = ep.image_size;
+        for c in &ep.cameras {
+            if let Some(d) = &c.depth {
+                let col = depth::column(&d.frames, d.encoding, w, h);
+                cols.push((depth::key(&c.name), col));
+            }
+        }
         let dim = ep.state_names.len();
         cols.push((
             "observation.state".into(),
@@ -264,6 +232,9 @@ impl Dataset {
                 format!("observation.images.{}", c.name),
                 Stats::of_image(&c.histogram),
             );
+            if let Some(d) = &c.depth {
+                stats.insert(depth::key(&c.name), d.stats.clone());
+            }
         }
         let provenance = Provenance {
             source: ep.source.display().to_string(),
@@ -271,6 +242,7 @@ impl Dataset {
             source_etag,
             report: ep.report.clone(),
             time_source: ep.time_source.clone(),
+            intrinsics: depth::episode_intrinsics(ep),
         };
         let streams: Vec<EncodedVideo> =
             ep.cameras.iter().filter_map(|c| c.video.clone()).collect();
@@ -300,6 +272,7 @@ impl Dataset {
             }
             Some(s)
                 if s.cameras != o.cameras
+                    || s.depth != o.depth
                     || s.state_names != o.state_names
                     || s.action_space != o.action_space
                     || s.joint_names != o.joint_names
@@ -340,6 +313,7 @@ impl Dataset {
             source_etag: rec.source_etag.clone(),
             report: rec.report.clone(),
             time_source: rec.time_source.clone(),
+            intrinsics: rec.intrinsics.clone(),
         };
         self.commit(cols, frames, task, stats, provenance, None)
     }
@@ -433,6 +407,7 @@ impl Dataset {
             report: provenance.report,
             time_source: provenance.time_source,
             video: video.as_ref().map(|v| v.0.clone()),
+            intrinsics: provenance.intrinsics,
         };
         if video.is_some_and(|v| v.1 >= VIDEO_FILE_SIZE_MB << 20) {
             self.video_tail = None;
@@ -447,7 +422,6 @@ impl Dataset {
     }
 }
 
-/// How cameras are stored, for a mismatch message.
 /// Appends an episode's streams to the open video file (a new one when none is open or the
 /// streams do not fit it) and stages its MP4s; the episode's span and the largest MP4's size.
 fn stage_video(

@@ -7,7 +7,8 @@
 //! allocated, and a payload must be consumed exactly (left-over bytes mean a different type).
 
 use scaledp_schema::msg::{
-    CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion, Time,
+    CameraInfo, CompressedImage, Header, Image, JointState, Point, Pose, PoseStamped, Quaternion,
+    RegionOfInterest, Time,
 };
 
 /// A ROS 1 payload that is not the message it should be: truncated, a length beyond the bytes
@@ -92,6 +93,43 @@ pub fn pose_stamped(data: &[u8]) -> Result<PoseStamped> {
 }
 
 /// Runs `f` on a reader over `data` and requires it to consume every byte.
+/// Decodes a ROS 1 `sensor_msgs/CameraInfo` (`D`, `K`, `R`, `P` in capitals there).
+pub fn camera_info(data: &[u8]) -> Result<CameraInfo> {
+    whole(data, |r| {
+        let header = r.header()?;
+        let (height, width) = (r.u32()?, r.u32()?);
+        let distortion_model = r.string()?;
+        let d = r.f64_seq()?;
+        let mut k = [0.0; 9];
+        let mut rot = [0.0; 9];
+        let mut p = [0.0; 12];
+        for v in k.iter_mut().chain(rot.iter_mut()).chain(p.iter_mut()) {
+            *v = r.f64()?;
+        }
+        let (binning_x, binning_y) = (r.u32()?, r.u32()?);
+        let roi = RegionOfInterest {
+            x_offset: r.u32()?,
+            y_offset: r.u32()?,
+            height: r.u32()?,
+            width: r.u32()?,
+            do_rectify: r.u8()? != 0,
+        };
+        Ok(CameraInfo {
+            header,
+            height,
+            width,
+            distortion_model,
+            d,
+            k,
+            r: rot,
+            p,
+            binning_x,
+            binning_y,
+            roi,
+        })
+    })
+}
+
 fn whole<T>(data: &[u8], f: impl FnOnce(&mut Reader<'_>) -> Result<T>) -> Result<T> {
     let mut r = Reader { buf: data, pos: 0 };
     let value = f(&mut r)?;

@@ -37,6 +37,7 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
         .use_log_time(args.log_time)
         .reorder_window(args.reorder_window)
         .action_space(args.action_space)
+        .depth(!args.no_depth)
         .video(args.video.map(|v| match v {
             VideoArg::Av1 => VideoCodec::Av1,
             VideoArg::H264 => VideoCodec::H264,

@@ -1,0 +1,310 @@
+//! Depth images, kept lossless: raw `sensor_msgs/Image` in `16UC1` (millimetres, 0 where
+//! unknown; `mono16` read the same) or `32FC1` (metres, NaN or ±inf where unknown), and
+//! image_transport's `compressedDepth` `sensor_msgs/CompressedImage` (see [`compressed`]),
+//! decoded to their values, resized by nearest neighbour only (a hole is never blended into its
+//! neighbours: it stays 0 or NaN) and stored as little-endian values.
+
+mod compressed;
+mod stats;
+
+use scaledp_schema::rig::DepthEncoding;
+use scaledp_schema::CdrReader;
+
+pub use compressed::decode_compressed_depth;
+pub use stats::DepthStats;
+
+/// Most pixels of a depth image decoded (as for colour frames: a header claiming more is
+/// refused before anything is allocated for it).
+pub(crate) const MAX_PIXELS: u64 = 64 << 20;
+
+/// A depth image's values, row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DepthPixels {
+    /// `16UC1`: millimetres, 0 where unknown.
+    U16(Vec<u16>),
+    /// `32FC1`: metres, NaN or ±inf where unknown.
+    F32(Vec<f32>),
+}
+
+/// A decoded depth image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthImage {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width × height` values.
+    pub pixels: DepthPixels,
+}
+
+impl DepthImage {
+    /// The encoding its values are in.
+    pub fn encoding(&self) -> DepthEncoding {
+        match self.pixels {
+            DepthPixels::U16(_) => DepthEncoding::U16Millimetres,
+            DepthPixels::F32(_) => DepthEncoding::F32Metres,
+        }
+    }
+
+    /// Resized to `width × height` by nearest neighbour: output pixel (x, y) takes source pixel
+    /// (⌊(x + ½)·W/w⌋, ⌊(y + ½)·H/h⌋), the source pixel under its centre. No value is ever
+    /// interpolated, so every output value is one the camera measured (or a hole it reported).
+    pub fn resized(&self, width: u32, height: u32) -> DepthImage {
+        if (width, height) == (self.width, self.height) {
+            return self.clone();
+        }
+        let xs = nearest_indices(self.width, width);
+        let ys = nearest_indices(self.height, height);
+        let src_w = self.width as usize;
+        fn pick<T: Copy>(src: &[T], xs: &[usize], ys: &[usize], src_w: usize) -> Vec<T> {
+            let mut out = Vec::with_capacity(xs.len() * ys.len());
+            for &y in ys {
+                let row = &src[y * src_w..(y + 1) * src_w];
+                out.extend(xs.iter().map(|&x| row[x]));
+            }
+            out
+        }
+        let pixels = match &self.pixels {
+            DepthPixels::U16(v) => DepthPixels::U16(pick(v, &xs, &ys, src_w)),
+            DepthPixels::F32(v) => DepthPixels::F32(pick(v, &xs, &ys, src_w)),
+        };
+        DepthImage {
+            width,
+            height,
+            pixels,
+        }
+    }
+
+    /// The values as little-endian bytes (2 or 4 per pixel), as the dataset stores them.
+    pub fn to_le_bytes(&self) -> Vec<u8> {
+        match &self.pixels {
+            DepthPixels::U16(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            DepthPixels::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+        }
+    }
+}
+
+/// For each of `to` output positions, the source position (of `from`) under its centre.
+pub fn nearest_indices(from: u32, to: u32) -> Vec<usize> {
+    let (from, to) = (u64::from(from), u64::from(to));
+    (0..to)
+        .map(|i| (((2 * i + 1) * from) / (2 * to)).min(from.saturating_sub(1)) as usize)
+        .collect()
+}
+
+/// The depth encoding of a raw image's `encoding`, if it is one: `16UC1` and `mono16`
+/// (millimetres), `32FC1` (metres).
+pub fn raw_depth_encoding(encoding: &str) -> Option<DepthEncoding> {
+    match encoding {
+        "16UC1" | "mono16" => Some(DepthEncoding::U16Millimetres),
+        "32FC1" => Some(DepthEncoding::F32Metres),
+        _ => None,
+    }
+}
+
+/// Whether a `CompressedImage` `format` is image_transport's `compressedDepth`
+/// (`16UC1; compressedDepth png`, `32FC1; compressedDepth`, …).
+pub fn is_compressed_depth(format: &str) -> bool {
+    format.contains("compressedDepth")
+}
+
+/// A raw depth image's fields (`sensor_msgs/Image` without its header).
+#[derive(Debug, Clone, Copy)]
+pub struct RawDepth<'a> {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `16UC1`, `mono16` or `32FC1`.
+    pub encoding: &'a str,
+    /// 1 when the values are big-endian.
+    pub is_bigendian: u8,
+    /// Bytes per row (may exceed width × bytes per pixel).
+    pub step: u32,
+    /// The pixels.
+    pub data: &'a [u8],
+}
+
+impl<'a> RawDepth<'a> {
+    /// Parses a CDR `sensor_msgs/msg/Image` payload without copying its pixels.
+    pub fn from_cdr(payload: &'a [u8]) -> Result<Self, String> {
+        let mut r = CdrReader::new(payload).map_err(|e| e.to_string())?;
+        let e = |e: scaledp_schema::Error| e.to_string();
+        r.u32().map_err(e)?; // stamp.sec
+        r.u32().map_err(e)?; // stamp.nanosec
+        r.str().map_err(e)?; // frame_id
+        Ok(Self {
+            height: r.u32().map_err(e)?,
+            width: r.u32().map_err(e)?,
+            encoding: r.str().map_err(e)?,
+            is_bigendian: r.u8().map_err(e)?,
+            step: r.u32().map_err(e)?,
+            data: r.bytes().map_err(e)?,
+        })
+    }
+
+    /// The values, honouring `step` (row padding) and `is_bigendian`.
+    pub fn decode(&self) -> Result<DepthImage, String> {
+        let encoding = raw_depth_encoding(self.encoding)
+            .ok_or_else(|| format!("'{}' is not a depth encoding", self.encoding))?;
+        let (w, h, step) = (
+            self.width as usize,
+            self.height as usize,
+            self.step as usize,
+        );
+        let bad = |problem: String| {
+            format!(
+                "{} image {}×{}: {problem}",
+                self.encoding, self.width, self.height
+            )
+        };
+        if w == 0 || h == 0 {
+            return Err(bad("no pixels".into()));
+        }
+        if u64::from(self.width) * u64::from(self.height) > MAX_PIXELS {
+            return Err(bad(format!(
+                "more than the {} M pixels the converter decodes",
+                MAX_PIXELS >> 20
+            )));
+        }
+        let bpp = encoding.bytes_per_pixel();
+        let row = w * bpp;
+        if step < row {
+            return Err(bad(format!(
+                "step {step} is smaller than width {w} × {bpp} bytes"
+            )));
+        }
+        let needed = step
+            .checked_mul(h - 1)
+            .and_then(|b| b.checked_add(row))
+            .ok_or_else(|| bad(format!("absurd size (step {step})")))?;
+        if self.data.len() < needed {
+            return Err(bad(format!(
+                "{} data bytes, but {h} rows of step {step} need {needed}",
+                self.data.len()
+            )));
+        }
+        let big = self.is_bigendian != 0;
+        let rows = self.data.chunks(step).take(h).map(|r| &r[..row]);
+        let pixels = match encoding {
+            DepthEncoding::U16Millimetres => DepthPixels::U16(
+                rows.flat_map(|r| r.chunks_exact(2))
+                    .map(|b| {
+                        let b = [b[0], b[1]];
+                        if big {
+                            u16::from_be_bytes(b)
+                        } else {
+                            u16::from_le_bytes(b)
+                        }
+                    })
+                    .collect(),
+            ),
+            DepthEncoding::F32Metres => DepthPixels::F32(
+                rows.flat_map(|r| r.chunks_exact(4))
+                    .map(|b| {
+                        let b = [b[0], b[1], b[2], b[3]];
+                        if big {
+                            f32::from_be_bytes(b)
+                        } else {
+                            f32::from_le_bytes(b)
+                        }
+                    })
+                    .collect(),
+            ),
+        };
+        Ok(DepthImage {
+            width: self.width,
+            height: self.height,
+            pixels,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use scaledp_schema::msg::Image;
+    use scaledp_schema::RosMessage;
+
+    #[test]
+    fn nearest_takes_the_pixel_under_each_centre() {
+        assert_eq!(nearest_indices(4, 2), vec![1, 3]);
+        assert_eq!(nearest_indices(2, 4), vec![0, 0, 1, 1]);
+        assert_eq!(nearest_indices(5, 5), vec![0, 1, 2, 3, 4]);
+        assert_eq!(nearest_indices(640, 320)[..3], [1, 3, 5]);
+        assert_eq!(*nearest_indices(3, 7).last().unwrap(), 2);
+    }
+
+    #[test]
+    fn holes_survive_resizing() {
+        let img = DepthImage {
+            width: 4,
+            height: 2,
+            pixels: DepthPixels::F32(vec![1.0, f32::NAN, 3.0, 4.0, 5.0, 6.0, 7.0, f32::NAN]),
+        };
+        let small = img.resized(2, 1);
+        let DepthPixels::F32(v) = &small.pixels else {
+            panic!("f32")
+        };
+        // Row 1 (y = ⌊0.5·2⌋), columns 1 and 3: 6 and the hole.
+        assert_eq!(v[0], 6.0);
+        assert!(v[1].is_nan());
+        let mm = DepthImage {
+            width: 2,
+            height: 2,
+            pixels: DepthPixels::U16(vec![0, 1000, 2000, 0]),
+        };
+        let big = mm.resized(4, 4);
+        assert_eq!(
+            big.pixels,
+            DepthPixels::U16(vec![
+                0, 0, 1000, 1000, 0, 0, 1000, 1000, 2000, 2000, 0, 0, 2000, 2000, 0, 0
+            ])
+        );
+        assert_eq!(mm.to_le_bytes(), vec![0, 0, 232, 3, 208, 7, 0, 0]);
+    }
+
+    #[test]
+    fn raw_images_honour_step_and_byte_order() {
+        // 2×2 16UC1, big-endian, 2 bytes of padding per row.
+        let msg = Image {
+            width: 2,
+            height: 2,
+            encoding: "16UC1".into(),
+            is_bigendian: 1,
+            step: 6,
+            data: vec![0x03, 0xe8, 0, 0, 9, 9, 0x07, 0xd0, 0x00, 0x01, 9, 9],
+            ..Default::default()
+        };
+        let cdr = msg.to_cdr();
+        let d = RawDepth::from_cdr(&cdr).unwrap().decode().unwrap();
+        assert_eq!(d.pixels, DepthPixels::U16(vec![1000, 0, 2000, 1]));
+        let short = Image {
+            data: vec![0; 5],
+            ..msg.clone()
+        };
+        let e = RawDepth::from_cdr(&short.to_cdr())
+            .unwrap()
+            .decode()
+            .unwrap_err();
+        assert!(e.contains("need 10"), "{e}");
+        let f = Image {
+            encoding: "32FC1".into(),
+            is_bigendian: 0,
+            step: 8,
+            data: [1.5f32, f32::NAN, f32::INFINITY, 0.25]
+                .iter()
+                .flat_map(|v| v.to_le_bytes())
+                .collect(),
+            ..msg
+        };
+        let d = RawDepth::from_cdr(&f.to_cdr()).unwrap().decode().unwrap();
+        let DepthPixels::F32(v) = d.pixels else {
+            panic!("f32")
+        };
+        assert_eq!((v[0], v[2], v[3]), (1.5, f32::INFINITY, 0.25));
+        assert!(v[1].is_nan());
+    }
+}
