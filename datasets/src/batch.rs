@@ -49,6 +49,23 @@ pub struct Batch {
     pub frame_index: Vec<i64>,
 }
 
+/// The depth of a batch's samples ([`crate::LoaderOptions::depth`],
+/// [`crate::Loader::next_with_depth`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DepthBatch {
+    /// Depth feature keys in `values` order (`observation.depth.<camera>`).
+    pub cameras: Vec<String>,
+    /// Their units, `mm` or `m`.
+    pub units: Vec<String>,
+    /// Frame height (the batch's image height when it has images).
+    pub height: u32,
+    /// Frame width.
+    pub width: u32,
+    /// `[B, To, cameras, H, W]`, `f32` in each camera's stored unit: millimetres (0 where
+    /// unknown) or metres (NaN or ±inf where unknown).
+    pub values: Vec<f32>,
+}
+
 /// Builds the batch of `order[range]`. A sample whose images cannot be read or decoded fails
 /// the batch, or with [`crate::LoaderOptions::skip_bad_samples`] is left out of it (counted,
 /// logged) while the loader's budget lasts: the batch is then shorter than the range.
@@ -57,7 +74,7 @@ pub(crate) fn assemble(
     order: &[Sample],
     range: Range<usize>,
     cache: Option<&mut Cache>,
-) -> Result<Batch> {
+) -> Result<(Batch, Option<DepthBatch>)> {
     let o = &shared.opts;
     let info = &shared.info;
     let samples = &order[range.clone()];
@@ -66,6 +83,9 @@ pub(crate) fn assemble(
     let plane = 3 * info.width as usize * info.height as usize;
     let per_sample = to * cams * plane;
     let b = samples.len();
+    let (depth_width, depth_height) = shared.depth.as_ref().map_or((0, 0), |d| d.out);
+    let depth_plane = depth_width as usize * depth_height as usize;
+    let depth_per_sample = to * info.depth_cameras.len() * depth_plane;
     let mut batch = Batch {
         len: b,
         obs_horizon: to,
@@ -86,6 +106,13 @@ pub(crate) fn assemble(
             .collect(),
         frame_index: samples.iter().map(|s| i64::from(s.t)).collect(),
     };
+    let mut depth = shared.depth.as_ref().map(|_| DepthBatch {
+        cameras: info.depth_cameras.clone(),
+        units: info.depth_units.clone(),
+        height: depth_height,
+        width: depth_width,
+        values: vec![0.0; b * depth_per_sample],
+    });
     // Streaming: read the episodes this batch needs that are not open yet.
     let mut cache = cache;
     let unread = match cache.as_deref_mut() {
@@ -106,6 +133,9 @@ pub(crate) fn assemble(
     let action = rows(&mut batch.action, c * a_dim, b);
     let obs_pad = rows(&mut batch.obs_is_pad, to, b);
     let act_pad = rows(&mut batch.action_is_pad, c, b);
+    let mut no_depth = Vec::new();
+    let depth_values = depth.as_mut().map_or(&mut no_depth, |d| &mut d.values);
+    let depth_rows = rows(depth_values, depth_per_sample, b);
     let filled: Vec<Result<bool>> = shared.pool.install(|| {
         images
             .into_par_iter()
@@ -113,12 +143,21 @@ pub(crate) fn assemble(
             .zip(action)
             .zip(obs_pad)
             .zip(act_pad)
+            .zip(depth_rows)
             .zip(samples.par_iter())
-            .map(|(((((img, st), ac), op), ap), s)| {
+            .map(|((((((img, st), ac), op), ap), dp), s)| {
                 if unread_eps.contains(&s.episode) {
                     return Ok(false);
                 }
-                fill(shared, s, open, img, st, ac, op, ap, plane).map(|()| true)
+                let out = Row {
+                    img,
+                    st,
+                    ac,
+                    op,
+                    ap,
+                    dp,
+                };
+                fill(shared, s, open, out, plane).map(|()| true)
             })
             .collect()
     });
@@ -137,8 +176,11 @@ pub(crate) fn assemble(
     }
     if keep.iter().any(|k| !k) {
         batch.retain(&keep, per_sample);
+        if let Some(d) = depth.as_mut() {
+            compact(&mut d.values, depth_per_sample, &keep);
+        }
     }
-    Ok(batch)
+    Ok((batch, depth))
 }
 
 /// The loader's budget of bad samples (see [`crate::LoaderOptions::skip_bad_samples`]).
@@ -165,18 +207,6 @@ impl Budget<'_> {
 impl Batch {
     /// Keeps the samples whose `keep` is true (in order); `per_sample` image bytes each.
     fn retain(&mut self, keep: &[bool], per_sample: usize) {
-        fn compact<T: Copy>(v: &mut Vec<T>, stride: usize, keep: &[bool]) {
-            let mut to = 0;
-            for (i, &k) in keep.iter().enumerate() {
-                if k {
-                    if to != i {
-                        v.copy_within(i * stride..(i + 1) * stride, to * stride);
-                    }
-                    to += 1;
-                }
-            }
-            v.truncate(to * stride);
-        }
         let (to, c) = (self.obs_horizon, self.action_chunk);
         compact(&mut self.images, per_sample, keep);
         compact(&mut self.state, to * self.state_dim, keep);
@@ -189,6 +219,20 @@ impl Batch {
     }
 }
 
+/// Keeps the `stride`-long rows of `v` whose `keep` is true, in order.
+fn compact<T: Copy>(v: &mut Vec<T>, stride: usize, keep: &[bool]) {
+    let mut to = 0;
+    for (i, &k) in keep.iter().enumerate() {
+        if k {
+            if to != i {
+                v.copy_within(i * stride..(i + 1) * stride, to * stride);
+            }
+            to += 1;
+        }
+    }
+    v.truncate(to * stride);
+}
+
 /// `buf` as `n` consecutive slices of `stride` elements (all empty when `stride` is 0).
 fn rows<T>(buf: &mut [T], stride: usize, n: usize) -> Vec<&mut [T]> {
     if stride == 0 {
@@ -197,18 +241,31 @@ fn rows<T>(buf: &mut [T], stride: usize, n: usize) -> Vec<&mut [T]> {
     buf.chunks_mut(stride).collect()
 }
 
-#[allow(clippy::too_many_arguments)]
+/// One sample's slices of the batch's buffers.
+struct Row<'a> {
+    img: &'a mut [u8],
+    st: &'a mut [f32],
+    ac: &'a mut [f32],
+    op: &'a mut [bool],
+    ap: &'a mut [bool],
+    dp: &'a mut [f32],
+}
+
 fn fill(
     shared: &Shared,
     s: &Sample,
     open: Option<&Open>,
-    img: &mut [u8],
-    st: &mut [f32],
-    ac: &mut [f32],
-    op: &mut [bool],
-    ap: &mut [bool],
+    out: Row<'_>,
     plane: usize,
 ) -> Result<()> {
+    let Row {
+        img,
+        st,
+        ac,
+        op,
+        ap,
+        dp,
+    } = out;
     let o = &shared.opts;
     let ep = &shared.episodes[s.episode as usize];
     let w = window(
@@ -231,12 +288,22 @@ fn fill(
     shared.norm.normalize_action(ac);
     op.copy_from_slice(&w.obs_is_pad);
     ap.copy_from_slice(&w.action_is_pad);
+    // Obs frames are ascending: one read covers them all.
+    let (lo, hi) = (w.obs[0], w.obs[w.obs.len() - 1]);
+    if let Some(depth) = &shared.depth {
+        let got = depth.read(ep, lo..hi + 1)?;
+        let n = got.len();
+        let per = dp.len() / (w.obs.len() * n).max(1);
+        for (k, &f) in w.obs.iter().enumerate() {
+            for (d, frames) in got.iter().enumerate() {
+                dp[(k * n + d) * per..][..per].copy_from_slice(&frames[f - lo]);
+            }
+        }
+    }
     let cams = &shared.info.cameras;
     if cams.is_empty() {
         return Ok(());
     }
-    // Obs frames are ascending: one read covers them all.
-    let (lo, hi) = (w.obs[0], w.obs[w.obs.len() - 1]);
     let fetched: Arc<Vec<Arc<dyn Fetched>>> = match open {
         Some(open) => open
             .get(&s.episode)

@@ -12,6 +12,7 @@
 
 mod batch;
 mod decode;
+mod depth;
 mod episodes;
 mod error;
 mod files;
@@ -28,7 +29,7 @@ mod store;
 mod stream;
 mod video;
 
-pub use batch::Batch;
+pub use batch::{Batch, DepthBatch};
 pub use error::{Error, Result};
 pub use files::DatasetFiles;
 pub use loader::{Loader, LoaderState};

@@ -8,7 +8,7 @@ use std::thread::JoinHandle;
 
 use crossbeam_channel::{bounded, Receiver};
 
-use crate::batch::{self, Batch};
+use crate::batch::{self, Batch, DepthBatch};
 use crate::error::{Error, Result};
 use crate::normalize::Normalizer;
 use crate::sampler::{self, Sample};
@@ -26,7 +26,7 @@ pub struct LoaderState {
 
 /// What the prefetch thread hands over: a batch (None when every sample of its range was
 /// skipped) and how many samples of the order it used.
-type Prepared = Result<(Option<Batch>, usize)>;
+type Prepared = Result<(Option<(Batch, Option<DepthBatch>)>, usize)>;
 
 struct Producer {
     rx: Receiver<Prepared>,
@@ -206,6 +206,12 @@ impl Loader {
 
     /// The next batch of the epoch; `None` at its end.
     pub fn next_batch(&mut self) -> Option<Result<Batch>> {
+        self.next_with_depth().map(|r| r.map(|(b, _)| b))
+    }
+
+    /// The next batch of the epoch and, with [`crate::LoaderOptions::depth`], its samples'
+    /// depth; `None` at the epoch's end.
+    pub fn next_with_depth(&mut self) -> Option<Result<(Batch, Option<DepthBatch>)>> {
         if self.position >= self.len() as u64 {
             return None;
         }
@@ -265,7 +271,7 @@ impl Loader {
                 while p < end && !stop2.load(Ordering::Relaxed) {
                     let q = (p + b).min(end);
                     let got = batch::assemble(&shared, &order, p..q, cache.as_mut())
-                        .map(|b| ((b.len > 0).then_some(b), q - p));
+                        .map(|b| ((b.0.len > 0).then_some(b), q - p));
                     let failed = got.is_err();
                     if tx.send(got).is_err() || failed {
                         break;

@@ -79,6 +79,10 @@ struct InfoJson {
     data_path: Option<String>,
     #[serde(default)]
     video_path: Option<String>,
+    /// What `scaledp convert` records beside LeRobot's keys (cameras' depth units,
+    /// intrinsics).
+    #[serde(default)]
+    scaledp: Option<serde_json::Value>,
 }
 
 /// A path template of `info.json` must stay inside the dataset: relative, no `..`.
@@ -107,6 +111,9 @@ pub struct Meta {
     pub totals: Option<(usize, usize)>,
     /// `video_path`, the template of video file paths (None: LeRobot's default, or no video).
     pub video_path: Option<String>,
+    /// `scaledp.cameras` of a dataset `scaledp convert` wrote: per camera its `intrinsics` and
+    /// `depth` (unit, encoding, the depth image's intrinsics).
+    pub cameras: serde_json::Map<String, serde_json::Value>,
 }
 
 impl Meta {
@@ -155,7 +162,17 @@ impl Meta {
             stats,
             totals: info.total_episodes.zip(info.total_frames),
             video_path: info.video_path,
+            cameras: info
+                .scaledp
+                .and_then(|v| v.get("cameras").and_then(|c| c.as_object().cloned()))
+                .unwrap_or_default(),
         })
+    }
+
+    /// The unit (`mm`, `m`) `info.json` gives camera `name`'s depth.
+    pub fn depth_unit(&self, name: &str) -> Option<String> {
+        let unit = self.cameras.get(name)?.get("depth")?.get("unit")?;
+        unit.as_str().map(String::from)
     }
 
     /// Keys of the image features, sorted.

@@ -6,6 +6,7 @@
 use std::sync::atomic::AtomicU64;
 use std::sync::Arc;
 
+use crate::depth::DepthSource;
 use crate::episodes::{read_segments, DEFAULT_VIDEO_PATH};
 use crate::error::{Error, Result};
 use crate::frames::{ImageSource, Sourced};
@@ -257,6 +258,23 @@ pub(crate) fn open(location: &str, opts: LoaderOptions) -> Result<(Shared, Arc<A
         &meta.features[&opts.state_key],
         &meta.features[&opts.action_key],
     );
+    let crate::depth::Picked {
+        keys: depth_cameras,
+        units: depth_units,
+        size: depth_size,
+    } = match opts.depth {
+        true => crate::depth::pick(&meta, &cameras, &info_file)?,
+        false => crate::depth::Picked {
+            keys: Vec::new(),
+            units: Vec::new(),
+            size: (0, 0),
+        },
+    };
+    let depth_out = if cameras.is_empty() {
+        depth_size
+    } else {
+        (width, height)
+    };
     let info = DatasetInfo {
         location: location.to_string(),
         fps: meta.fps,
@@ -269,6 +287,9 @@ pub(crate) fn open(location: &str, opts: LoaderOptions) -> Result<(Shared, Arc<A
         episode_lengths: lens.clone(),
         frames: lens.iter().sum(),
         total_episodes: data.episodes.len(),
+        depth_cameras: depth_cameras.clone(),
+        depth_units,
+        sensors: meta.cameras.clone(),
     };
     let pool = decode_pool(opts.threads)?;
     tracing::debug!(
@@ -290,10 +311,17 @@ pub(crate) fn open(location: &str, opts: LoaderOptions) -> Result<(Shared, Arc<A
         &bytes_read,
         &pool,
     )?;
+    let depth = opts.depth.then(|| DepthSource {
+        data: data.clone(),
+        keys: depth_cameras,
+        stored: depth_size,
+        out: depth_out,
+    });
     let opts_prefetch = opts.prefetch.max(1);
     let shared = Shared {
         data,
         sources,
+        depth,
         episodes,
         opts,
         info,

@@ -48,6 +48,7 @@ pub struct LoaderOptions {
     pub(crate) skip_bad_samples: usize,
     pub(crate) video_tolerance_s: f64,
     pub(crate) video_decoders: usize,
+    pub(crate) depth: bool,
 }
 
 impl Default for LoaderOptions {
@@ -80,6 +81,7 @@ impl Default for LoaderOptions {
             skip_bad_samples: 0,
             video_tolerance_s: 1e-4,
             video_decoders: 0,
+            depth: false,
         }
     }
 }
@@ -223,6 +225,14 @@ impl LoaderOptions {
     /// keyframe (default 0: twice the decoding threads × video cameras, 4 to 256).
     pub fn video_decoders(mut self, n: usize) -> Self {
         self.video_decoders = n;
+        self
+    }
+    /// Also yield the depth of the cameras loaded that have an `observation.depth.<camera>`
+    /// feature, in [`crate::Batch::depth`] (`f32` in the stored unit, which
+    /// [`crate::DatasetInfo::depth_units`] names; default false: depth is not read). Opening
+    /// fails when none of the cameras has depth.
+    pub fn depth(mut self, yes: bool) -> Self {
+        self.depth = yes;
         self
     }
     /// Opens the dataset at `location` (a directory or `s3://bucket/prefix`).

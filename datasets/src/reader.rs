@@ -211,6 +211,54 @@ impl Data {
         Ok(())
     }
 
+    /// Rows `rows` of one file, the columns of `mask`: only the pages holding those rows are
+    /// read (page index + row selection); a range may cross row groups (one read each).
+    pub fn read_rows(
+        &self,
+        file: usize,
+        rows: Range<usize>,
+        mask: ProjectionMask,
+    ) -> Result<Vec<RecordBatch>> {
+        let entry = &self.files[file];
+        let bad = |e: &dyn std::fmt::Display| Error::format(entry.file.name.clone(), e);
+        let mut out = Vec::new();
+        let mut start = rows.start;
+        while start < rows.end {
+            let rg = entry.rg_starts.partition_point(|&s| s <= start) - 1;
+            let rg_end = entry
+                .rg_starts
+                .get(rg + 1)
+                .copied()
+                .unwrap_or(rows.end)
+                .min(rows.end);
+            let skip = start - entry.rg_starts[rg];
+            let take = rg_end - start;
+            let selection =
+                RowSelection::from(vec![RowSelector::skip(skip), RowSelector::select(take)]);
+            let reader = ParquetRecordBatchReaderBuilder::new_with_metadata(
+                entry.file.clone(),
+                entry.meta.clone(),
+            )
+            .with_projection(mask.clone())
+            .with_row_groups(vec![rg])
+            .with_row_selection(selection)
+            .with_row_selection_policy(RowSelectionPolicy::Selectors)
+            .with_batch_size(take.max(1))
+            .build()
+            .map_err(|e| bad(&e))?;
+            for batch in reader {
+                out.push(batch.map_err(|e| bad(&e))?);
+            }
+            start = rg_end;
+        }
+        Ok(out)
+    }
+
+    /// The Parquet schema of file `file`, for projections.
+    pub fn parquet_schema(&self, file: usize) -> &parquet::schema::types::SchemaDescriptor {
+        self.files[file].meta.parquet_schema()
+    }
+
     /// Encoded images of rows `rows` (of one file) for the image columns `cams` (root keys):
     /// one array of `bytes` per camera, in `cams` order.
     pub fn read_images(
@@ -235,47 +283,20 @@ impl Data {
             })
             .collect::<Result<_>>()?;
         let mut out: Vec<Vec<ArrayRef>> = vec![Vec::new(); cams.len()];
-        // A range may cross row groups: one read per row group touched.
-        let mut start = rows.start;
-        while start < rows.end {
-            let rg = entry.rg_starts.partition_point(|&s| s <= start) - 1;
-            let rg_end = entry
-                .rg_starts
-                .get(rg + 1)
-                .copied()
-                .unwrap_or(rows.end)
-                .min(rows.end);
-            let skip = start - entry.rg_starts[rg];
-            let take = rg_end - start;
-            let selection =
-                RowSelection::from(vec![RowSelector::skip(skip), RowSelector::select(take)]);
-            let reader = ParquetRecordBatchReaderBuilder::new_with_metadata(
-                entry.file.clone(),
-                entry.meta.clone(),
-            )
-            .with_projection(ProjectionMask::leaves(pschema, leaves.iter().copied()))
-            .with_row_groups(vec![rg])
-            .with_row_selection(selection)
-            .with_row_selection_policy(RowSelectionPolicy::Selectors)
-            .with_batch_size(take.max(1))
-            .build()
-            .map_err(|e| bad(&e))?;
-            for batch in reader {
-                let batch: RecordBatch = batch.map_err(|e| bad(&e))?;
-                for (c, cam) in cams.iter().enumerate() {
-                    let col = batch
-                        .column_by_name(cam)
-                        .ok_or_else(|| bad(&format!("no image column {cam}")))?;
-                    let s: &StructArray = col
-                        .as_struct_opt()
-                        .ok_or_else(|| bad(&format!("{cam} is not an image struct")))?;
-                    let bytes = s
-                        .column_by_name("bytes")
-                        .ok_or_else(|| bad(&format!("{cam} has no bytes field")))?;
-                    out[c].push(bytes.clone());
-                }
+        let mask = ProjectionMask::leaves(pschema, leaves.iter().copied());
+        for batch in self.read_rows(file, rows.clone(), mask)? {
+            for (c, cam) in cams.iter().enumerate() {
+                let col = batch
+                    .column_by_name(cam)
+                    .ok_or_else(|| bad(&format!("no image column {cam}")))?;
+                let s: &StructArray = col
+                    .as_struct_opt()
+                    .ok_or_else(|| bad(&format!("{cam} is not an image struct")))?;
+                let bytes = s
+                    .column_by_name("bytes")
+                    .ok_or_else(|| bad(&format!("{cam} has no bytes field")))?;
+                out[c].push(bytes.clone());
             }
-            start = rg_end;
         }
         out.into_iter()
             .zip(cams)

@@ -6,6 +6,7 @@
 use std::sync::atomic::AtomicU64;
 use std::sync::{Arc, Mutex};
 
+use crate::depth::DepthSource;
 use crate::frames::Sourced;
 use crate::normalize::Normalizer;
 use crate::options::LoaderOptions;
@@ -37,6 +38,13 @@ pub struct DatasetInfo {
     pub frames: usize,
     /// Episodes in the whole dataset.
     pub total_episodes: usize,
+    /// Depth feature keys in [`crate::Batch::depth`] order (empty unless depth was asked for).
+    pub depth_cameras: Vec<String>,
+    /// Their units, `mm` or `m`, in the same order.
+    pub depth_units: Vec<String>,
+    /// `scaledp.cameras` of `info.json`, per camera name: `intrinsics` (K, D, P for the stored
+    /// image size) and `depth` (unit, the depth image's intrinsics), when the dataset has them.
+    pub sensors: serde_json::Map<String, serde_json::Value>,
 }
 
 /// Everything the prefetch thread shares with the loader.
@@ -44,6 +52,8 @@ pub(crate) struct Shared {
     pub data: Arc<Data>,
     /// Where the cameras' frames come from (images, video), each with its batch slots.
     pub sources: Vec<Sourced>,
+    /// Where depth comes from, when asked for.
+    pub depth: Option<DepthSource>,
     pub episodes: Vec<EpisodeRows>,
     pub opts: LoaderOptions,
     pub info: DatasetInfo,

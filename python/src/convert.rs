@@ -6,7 +6,7 @@ use numpy::{Element, PyArray1, PyArrayDyn, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use scaledp_datasets::{Batch, DatasetInfo, ImagePool, Norm, Split};
+use scaledp_datasets::{Batch, DatasetInfo, DepthBatch, ImagePool, Norm, Split};
 
 /// `"train" | "val" | "all"`.
 pub fn split(s: &str) -> PyResult<Split> {
@@ -88,7 +88,12 @@ fn image_array<'py>(
 
 /// A batch as the dict a training loop reads; every buffer moves into its array (images into
 /// one whose buffer returns to `pool` when freed).
-pub fn batch_dict(py: Python<'_>, b: Batch, pool: ImagePool) -> PyResult<Bound<'_, PyDict>> {
+pub fn batch_dict(
+    py: Python<'_>,
+    b: Batch,
+    depth: Option<DepthBatch>,
+    pool: ImagePool,
+) -> PyResult<Bound<'_, PyDict>> {
     let (n, to, c) = (b.len, b.obs_horizon, b.action_chunk);
     let (h, w) = (b.height as usize, b.width as usize);
     let d = PyDict::new(py);
@@ -105,7 +110,42 @@ pub fn batch_dict(py: Python<'_>, b: Batch, pool: ImagePool) -> PyResult<Bound<'
     d.set_item("action_is_pad", array(py, b.action_is_pad, vec![n, c])?)?;
     d.set_item("episode_index", array(py, b.episode_index, vec![n])?)?;
     d.set_item("frame_index", array(py, b.frame_index, vec![n])?)?;
+    if let Some(depth) = depth {
+        let (dh, dw) = (depth.height as usize, depth.width as usize);
+        let shape = vec![n, to, depth.cameras.len(), dh, dw];
+        d.set_item("observation.depth", array(py, depth.values, shape)?)?;
+    }
     Ok(d)
+}
+
+/// A JSON value as the Python value `json.loads` would give.
+fn json<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    use pyo3::types::{PyList, PyNone};
+    use pyo3::IntoPyObjectExt;
+    Ok(match v {
+        serde_json::Value::Null => PyNone::get(py).to_owned().into_any(),
+        serde_json::Value::Bool(b) => b.into_bound_py_any(py)?,
+        serde_json::Value::Number(n) => match (n.as_i64(), n.as_f64()) {
+            (Some(i), _) => i.into_bound_py_any(py)?,
+            (None, Some(f)) => f.into_bound_py_any(py)?,
+            _ => n.to_string().into_bound_py_any(py)?,
+        },
+        serde_json::Value::String(s) => s.into_bound_py_any(py)?,
+        serde_json::Value::Array(a) => {
+            let items = a
+                .iter()
+                .map(|x| json(py, x))
+                .collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
+        serde_json::Value::Object(o) => {
+            let d = PyDict::new(py);
+            for (k, x) in o {
+                d.set_item(k, json(py, x)?)?;
+            }
+            d.into_any()
+        }
+    })
 }
 
 /// What the loader reads, as a dict.
@@ -120,5 +160,11 @@ pub fn info_dict<'py>(py: Python<'py>, i: &DatasetInfo) -> PyResult<Bound<'py, P
     d.set_item("episodes", &i.episodes)?;
     d.set_item("frames", i.frames)?;
     d.set_item("total_episodes", i.total_episodes)?;
+    d.set_item("depth_cameras", &i.depth_cameras)?;
+    d.set_item("depth_units", &i.depth_units)?;
+    d.set_item(
+        "intrinsics",
+        json(py, &serde_json::Value::Object(i.sensors.clone()))?,
+    )?;
     Ok(d)
 }

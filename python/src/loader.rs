@@ -17,7 +17,10 @@ use crate::to_py;
 /// Iterating yields the rest of the current epoch as dicts of numpy arrays:
 /// `observation.images` uint8 `[B, To, cams, 3, H, W]`, `observation.state` float32
 /// `[B, To, S]`, `action` float32 `[B, C, A]`, `obs_is_pad` bool `[B, To]`, `action_is_pad`
-/// bool `[B, C]`, `episode_index` and `frame_index` int64 `[B]`. When an epoch ends the loader
+/// bool `[B, C]`, `episode_index` and `frame_index` int64 `[B]`; with `depth=True` also
+/// `observation.depth` float32 `[B, To, depth cameras, H, W]` in each camera's stored unit
+/// (`info["depth_cameras"]`, `info["depth_units"]`: `mm`, 0 where unknown, or `m`, NaN where
+/// unknown). When an epoch ends the loader
 /// moves on to the next one, so `for batch in loader:` once per epoch gives a new order each
 /// time; `set_epoch(e)` picks the epoch explicitly (as with DDP's `DistributedSampler`).
 #[pyclass(module = "scaledp_data")]
@@ -34,6 +37,7 @@ impl Loader {
         max_episodes=None, state_norm="mean_std", action_norm="min_max", batch_size=64,
         drop_incomplete_batch=false, shuffle=true, seed=0, rank=0, world_size=1, threads=0,
         prefetch=2, streaming=None, skip_bad_samples=0, video_tolerance_s=1e-4, video_decoders=0,
+        depth=false,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -64,6 +68,7 @@ impl Loader {
         skip_bad_samples: usize,
         video_tolerance_s: f64,
         video_decoders: usize,
+        depth: bool,
     ) -> PyResult<Self> {
         let location = location
             .to_str()
@@ -89,7 +94,8 @@ impl Loader {
             .prefetch(prefetch)
             .skip_bad_samples(skip_bad_samples)
             .video_tolerance_s(video_tolerance_s)
-            .video_decoders(video_decoders);
+            .video_decoders(video_decoders)
+            .depth(depth);
         if let Some(c) = cameras {
             o = o.cameras(c);
         }
@@ -164,7 +170,9 @@ impl Loader {
     }
 
     /// What the loader reads: fps, cameras, image_size (w, h), state/action names, episodes
-    /// (their `episode_index`), frames, total_episodes, location.
+    /// (their `episode_index`), frames, total_episodes, location, depth_cameras and
+    /// depth_units, and `intrinsics` (per camera name, `scaledp.cameras` of `info.json`: K, D,
+    /// P for the stored images, and the depth's unit and intrinsics).
     #[getter]
     fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         info_dict(py, self.inner.info())
@@ -176,8 +184,8 @@ impl Loader {
 
     fn __next__<'py>(&mut self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         let inner = &mut self.inner;
-        match py.detach(|| inner.next_batch()) {
-            Some(Ok(b)) => Ok(Some(batch_dict(py, b, self.inner.image_pool())?)),
+        match py.detach(|| inner.next_with_depth()) {
+            Some(Ok((b, depth))) => Ok(Some(batch_dict(py, b, depth, self.inner.image_pool())?)),
             Some(Err(e)) => Err(to_py(e)),
             None => {
                 let next = self.inner.state().epoch.wrapping_add(1);
