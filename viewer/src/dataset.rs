@@ -15,7 +15,7 @@ use scaledp_schema::ActionSpace;
 use serde::Deserialize;
 
 use crate::columns::{image_bytes, ints, strings, vectors};
-use crate::episode::{log_rows, Rows};
+use crate::episode::{log_rows, predicted_rows, Rows};
 use crate::error::{Error, Result};
 use crate::images::encoded_frame;
 use crate::layout;
@@ -273,7 +273,8 @@ impl Dataset {
         };
         if let Some(p) = prediction {
             rows.predicted =
-                predicted_rows(p, &frame_index, rows.action_names.len()).map_err(|e| bad(&e))?;
+                predicted_rows(&p.frames, &p.values, &frame_index, rows.action_names.len())
+                    .map_err(|e| bad(&e))?;
         }
         let rig = self.rig(rig);
         log_rows(rec, &rows, rig.as_ref(), chunk, &at)?;
@@ -286,6 +287,14 @@ impl Dataset {
                 warnings.push(format!(
                     "{key}: video features are not shown (image features only)"
                 ));
+                continue;
+            }
+            if let (Some(c), Some(camera)) = (root(key), key.strip_prefix("observation.depth.")) {
+                let entity = layout::depth(camera);
+                let batches = read(vec![c], IMAGE_BATCH)?;
+                let n = crate::depth::log_column(rec, &entity, batches, max_width, &at)
+                    .map_err(|e| bad(&format!("{key}: {e}")))?;
+                *frames.entry(entity).or_insert(0u64) += n;
                 continue;
             }
             let (Some(c), true) = (root(key), f.dtype == "image") else {
@@ -376,8 +385,13 @@ impl Dataset {
             .info
             .features
             .iter()
-            .filter(|(_, f)| f.dtype == "image")
-            .map(|(k, _)| layout::camera(k.strip_prefix("observation.images.").unwrap_or(k)))
+            .filter_map(|(k, f)| match k.strip_prefix("observation.depth.") {
+                Some(camera) => Some(layout::depth(camera)),
+                None if f.dtype == "image" => Some(layout::camera(
+                    k.strip_prefix("observation.images.").unwrap_or(k),
+                )),
+                None => None,
+            })
             .collect();
         let rig = self.rig(rig);
         let space = self.space();
@@ -468,29 +482,4 @@ fn read_episodes(files: &DatasetFiles, rel: &str, out: &mut Vec<EpisodeMeta>) ->
         }
     }
     Ok(())
-}
-
-/// `p`'s chunks on the episode's rows (by `frame_index`); an error when their size does not
-/// fit the dataset's action dimensions.
-fn predicted_rows(
-    p: &Prediction,
-    frame_index: &[i64],
-    dim: usize,
-) -> std::result::Result<Vec<Option<Vec<f32>>>, String> {
-    let n = p.frames.len();
-    if n == 0 || dim == 0 || p.values.len() % (n * dim) != 0 {
-        return Err(format!(
-            "the predicted chunks ({} values for {n} frames) do not fit {dim} action dimensions",
-            p.values.len()
-        ));
-    }
-    let per = p.values.len() / n;
-    let at: BTreeMap<i64, usize> = p.frames.iter().enumerate().map(|(i, &f)| (f, i)).collect();
-    Ok(frame_index
-        .iter()
-        .map(|f| {
-            at.get(f)
-                .map(|&i| p.values[i * per..(i + 1) * per].to_vec())
-        })
-        .collect())
 }

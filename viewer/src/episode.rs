@@ -7,6 +7,7 @@
 use rerun::{LineStrips3D, RecordingStream, Scalars, SeriesLines, SeriesPoints, TextLog};
 use scaledp_schema::rig::Rig;
 use scaledp_schema::ActionSpace;
+use std::collections::BTreeMap;
 
 use crate::arm::ArmModel;
 use crate::error::{Error, Result};
@@ -294,4 +295,27 @@ pub(crate) fn log_quality(rec: &RecordingStream, q: &Quality, at: &dyn Fn(usize)
         }
     }
     Ok(())
+}
+
+/// A prediction's chunks (`values`, one chunk per frame of `frames`) on the episode's rows (by
+/// `frame_index`); an error when their size does not fit the dataset's action dimensions.
+pub(crate) fn predicted_rows(
+    frames: &[i64],
+    values: &[f32],
+    frame_index: &[i64],
+    dim: usize,
+) -> std::result::Result<Vec<Option<Vec<f32>>>, String> {
+    let n = frames.len();
+    if n == 0 || dim == 0 || values.len() % (n * dim) != 0 {
+        return Err(format!(
+            "the predicted chunks ({} values for {n} frames) do not fit {dim} action dimensions",
+            values.len()
+        ));
+    }
+    let per = values.len() / n;
+    let at: BTreeMap<i64, usize> = frames.iter().enumerate().map(|(i, &f)| (f, i)).collect();
+    Ok(frame_index
+        .iter()
+        .map(|f| at.get(f).map(|&i| values[i * per..(i + 1) * per].to_vec()))
+        .collect())
 }

@@ -20,6 +20,8 @@ pub(crate) enum Frame {
     Raw(Image),
     /// Encoded bytes (JPEG or PNG).
     Encoded(EncodedImage),
+    /// Depth values and their meter.
+    Depth(Box<rerun::DepthImage>),
 }
 
 impl Frame {
@@ -32,6 +34,7 @@ impl Frame {
         match self {
             Self::Raw(i) => rec.log(path, i),
             Self::Encoded(e) => rec.log(path, e),
+            Self::Depth(d) => rec.log(path, d.as_ref()),
         }
     }
 }
@@ -127,13 +130,16 @@ pub(crate) fn encoded_frame(bytes: &[u8], max_width: Option<u32>) -> Result<Fram
 }
 
 /// A camera message (`sensor_msgs/Image` or `CompressedImage`, CDR or ROS 1) → its capture
-/// stamp (ns; 0 when the header has none) and the frame to log.
+/// stamp (ns; 0 when the header has none) and the frame to log (depth as a depth image).
 pub(crate) fn message_frame(
     message_type: &str,
     serialization: Serialization,
     data: &[u8],
     max_width: Option<u32>,
 ) -> Result<(u64, Frame), String> {
+    if let Some(depth) = crate::depth::depth_message(message_type, serialization, data, max_width) {
+        return depth.map(|(t, d)| (t, Frame::Depth(Box::new(d))));
+    }
     let compressed = message_type.ends_with("/CompressedImage");
     match (serialization, compressed) {
         (Serialization::Cdr, false) => {

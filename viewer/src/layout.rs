@@ -29,6 +29,14 @@ pub const POSE_DIMS: [&str; 7] = ["x", "y", "z", "roll", "pitch", "yaw", "grippe
 pub fn camera(name: &str) -> String {
     format!("cameras/{}", part(name))
 }
+/// A camera's registered depth (a depth image with its meter).
+pub fn depth(camera: &str) -> String {
+    format!("depth/{}", part(camera))
+}
+/// A tf frame, placed by the transform from its parent (`/tf`, `/tf_static`).
+pub fn tf(frame: &str) -> String {
+    format!("{WORLD}/tf/{}", part(frame))
+}
 /// An arm's joint positions (one series per joint).
 pub fn joints(arm: &str) -> String {
     format!("joints/{}", part(arm))
@@ -110,7 +118,7 @@ fn part(s: &str) -> String {
 /// What an episode shows, for its blueprint.
 #[derive(Debug, Default, Clone)]
 pub struct Shape {
-    /// Camera entity paths.
+    /// Camera entity paths (colour `cameras/…`, depth `depth/…`).
     pub cameras: Vec<String>,
     /// Arm names (joint, gripper and pose plots, 3-D).
     pub arms: Vec<String>,
@@ -137,7 +145,7 @@ pub fn blueprint(shape: &Shape) -> Blueprint {
         .cameras
         .iter()
         .map(|c| {
-            Spatial2DView::new(c.trim_start_matches("cameras/"))
+            Spatial2DView::new(c.strip_prefix("cameras/").unwrap_or(c))
                 .with_origin(c.as_str())
                 .into()
         })
@@ -228,5 +236,10 @@ mod tests {
         assert_eq!(topic("/franka/joint_states"), "topics/franka/joint_states");
         assert_eq!(camera("a b[0]"), "cameras/a_b_0_");
         assert_eq!(link("arm", 8), "world/arm/links/8");
+        assert_eq!(depth("wrist"), "depth/wrist");
+        assert_eq!(
+            tf("camera_color_optical_frame"),
+            "world/tf/camera_color_optical_frame"
+        );
     }
 }

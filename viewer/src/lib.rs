@@ -20,6 +20,8 @@
 //! | path | what | when |
 //! |---|---|---|
 //! | `cameras/<camera>` | every frame (recordings), every stored frame (datasets) | per frame |
+//! | `depth/<camera>` | the camera's registered depth (`DepthImage`, meter 1000 for mm, 1 for m) | per frame |
+//! | `world/tf/<frame>` | a tf frame placed by its transform from its parent (`/tf`, `/tf_static`), with axes; a tree's root tied to `world` | per message / static |
 //! | `joints/<arm>` | measured joint positions, one series per joint | per message |
 //! | `gripper/<arm>` | measured gripper opening (m) | per message |
 //! | `topics/<topic>` | joint states of topics no arm of the rig reads | per message |
@@ -46,6 +48,7 @@
 mod arm;
 mod columns;
 mod dataset;
+mod depth;
 mod episode;
 mod error;
 mod images;

@@ -23,6 +23,8 @@ use crate::sink::Backpressure;
 #[derive(Debug, Clone)]
 enum Route {
     Camera(String),
+    /// `/tf` (false) or `/tf_static` (true).
+    Tf(bool),
     Arm(usize),
     Gripper(usize),
     Topic(String),
@@ -42,6 +44,8 @@ pub(crate) struct Collected {
     pub frames_logged: BTreeMap<String, u64>,
     /// Joint-state messages logged.
     pub joint_messages: u64,
+    /// tf transforms logged (`/tf`, `/tf_static`).
+    pub transforms: u64,
     /// Per topic: messages that could not be decoded, and the first reason.
     pub undecodable: BTreeMap<String, (u64, String)>,
     /// Why reading stopped early, if it did.
@@ -60,6 +64,7 @@ pub(crate) struct Collector<'a> {
     /// Keep messages and stamps for the episode view (not in a live session).
     keep: bool,
     pace: Backpressure,
+    tf: crate::depth::TfTree,
     out: Collected,
 }
 
@@ -75,6 +80,7 @@ impl<'a> Collector<'a> {
             index: HashMap::new(),
             keep: true,
             pace: Backpressure::default(),
+            tf: crate::depth::TfTree::default(),
             out: Collected::default(),
         }
     }
@@ -112,6 +118,12 @@ impl<'a> Collector<'a> {
             if let Some(c) = rig.cameras.iter().find(|c| c.topic == topic) {
                 return Route::Camera(layout::camera(&c.name));
             }
+            let depth_of = |c: &&scaledp_schema::rig::Camera| {
+                c.depth.as_ref().is_some_and(|d| d.topic == topic)
+            };
+            if let Some(c) = rig.cameras.iter().find(depth_of) {
+                return Route::Camera(layout::depth(&c.name));
+            }
             for (i, a) in rig.arms.iter().enumerate() {
                 if a.joint_state_topic == topic {
                     return Route::Arm(i);
@@ -126,6 +138,7 @@ impl<'a> Collector<'a> {
                 Route::Camera(layout::camera(&topic.trim_matches('/').replace('/', "_")))
             }
             "sensor_msgs/msg/JointState" => Route::Topic(layout::topic(topic)),
+            scaledp_schema::rig::TF_MESSAGE => Route::Tf(topic == "/tf_static"),
             _ => Route::Keep,
         }
     }
@@ -215,6 +228,13 @@ impl<'a> Collector<'a> {
                     Err(reason) => self.failed(topic, reason),
                 }
             }
+            Route::Tf(latched) if serialization == Serialization::Cdr => {
+                match self.tf.message(self.rec, data, latched) {
+                    Ok(n) => self.out.transforms += n as u64,
+                    Err(reason) => self.failed(topic, reason),
+                }
+            }
+            Route::Tf(_) => self.failed(topic, "tf from ROS 1 bags is not shown".into()),
             Route::Keep if self.keep => self.out.recording.messages.push(raw()),
             Route::Keep => {}
         }
