@@ -34,6 +34,7 @@ mod checks;
 mod control;
 mod episode;
 mod error;
+mod intake;
 pub mod keys;
 mod latched;
 mod links;
@@ -41,7 +42,9 @@ pub mod net;
 mod options;
 mod patterns;
 mod recover;
+mod report;
 mod session;
+mod state;
 mod subscribe;
 mod writer;
 
@@ -51,8 +54,11 @@ pub use episode::{
     OFFERED_QOS_LATCHED_YAML, OFFERED_QOS_YAML,
 };
 pub use error::{Error, Result};
+pub use intake::Control;
 pub use options::RecorderOptions;
 pub use patterns::{parse_message_type, TopicPattern};
 pub use recover::{default_output, recover, RecoverySummary};
-pub use session::{now_ns, Control, EpisodeReport, Event, Recorder, Status, TopicStatus};
+pub use report::{EpisodeReport, Event, Status, TopicStatus};
+pub use session::Recorder;
+pub use state::now_ns;
 pub use writer::episode_file_name;

@@ -12,7 +12,7 @@ use std::time::Duration;
 use zenoh::Wait;
 
 use crate::error::{Error, Result};
-use crate::session::{now_ns, Shared};
+use crate::state::{now_ns, Shared};
 
 pub(crate) struct LinkWatch {
     stop: Arc<AtomicBool>,

@@ -1,21 +1,13 @@
-//! Settings of a recording session and how `start` opens it: definitions resolved, subscribers
-//! declared, the writer and the link watch started.
+//! Settings of a recording session (`start`, in `session`, opens it).
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Duration;
 
 use scaledp_schema::msg::MsgSearch;
 use scaledp_schema::rig::Rig;
 
-use crate::channels::Channel;
 use crate::episode::{Compression, EpisodeOptions};
-use crate::error::{Error, Result};
-use crate::links::LinkWatch;
 use crate::patterns::TopicPattern;
-use crate::session::{Control, Recorder, Shared};
-use crate::subscribe;
-use crate::writer::WriterThread;
 
 /// Settings of a recording session; `start` opens it.
 #[derive(Debug, Clone)]
@@ -105,64 +97,5 @@ impl RecorderOptions {
     pub fn msg_search(mut self, search: MsgSearch) -> Self {
         self.msg_search = search;
         self
-    }
-
-    /// Opens a Zenoh session with `config`, subscribes to every topic of the rig (bridge and
-    /// rmw_zenoh keys; latched topics also through the publishers' caches) and to the control
-    /// key, and starts the writer thread. No episode is open until a [`crate::Command::Start`].
-    pub fn start(self, config: zenoh::Config) -> Result<Recorder> {
-        std::fs::create_dir_all(&self.out_dir).map_err(Error::io(&self.out_dir))?;
-        let topics = self.rig.topics();
-        let mut search = self.msg_search.clone();
-        let channels: Vec<Channel> = topics
-            .iter()
-            .map(|t| Channel::resolve(t.clone(), &mut search))
-            .collect();
-        let session = crate::net::open(config)?;
-        let shared = Arc::new(Shared::new(&topics, &self));
-        let (tx, rx) = crossbeam_channel::unbounded();
-        let control = Control::new(tx, shared.clone());
-        let ns = self.bridge_namespace.clone();
-        let mut subscribers = subscribe::topics(&session, &control, &topics, &ns)?;
-        for p in &self.patterns {
-            subscribers.extend(subscribe::pattern(&session, &control, p, &ns)?);
-        }
-        if !self.patterns.is_empty() {
-            subscribers.push(subscribe::bridge_types(&session, &shared)?);
-        }
-        subscribers.push(subscribe::control(
-            &session,
-            &control,
-            &self.control_prefix,
-        )?);
-        let (events_tx, events) = crossbeam_channel::unbounded();
-        let writer = WriterThread::new(
-            self,
-            channels,
-            search,
-            shared.clone(),
-            events_tx,
-            session.clone(),
-        );
-        let handle = std::thread::Builder::new()
-            .name("scaledp-writer".into())
-            .spawn(move || writer.run(rx))
-            .map_err(Error::io("writer thread"))?;
-        // The caches of zenoh-bridge-ros2dds up to 1.5.0 are queried now and whenever a link
-        // comes (back) up: a bridge restarted meanwhile serves its cache again.
-        let latched = subscribe::latched_keys(&topics, &ns);
-        let (s, c) = (session.clone(), control.clone());
-        let query = move || subscribe::query_bridge_caches(&s, &c, &latched);
-        query();
-        let links = LinkWatch::start(session.clone(), shared.clone(), Box::new(query))?;
-        Ok(Recorder::new(
-            session,
-            subscribers,
-            control,
-            shared,
-            events,
-            handle,
-            links,
-        ))
     }
 }

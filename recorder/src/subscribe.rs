@@ -23,11 +23,12 @@ use zenoh_ext::{AdvancedSubscriber, AdvancedSubscriberBuilderExt, HistoryConfig}
 
 use crate::control::Command;
 use crate::error::{Error, Result};
+use crate::intake::Control;
 use crate::keys::{
     bridge_cache_selector, bridge_key, parse_rmw_key, rmw_key_expr, topic_from_bridge_key,
 };
 use crate::patterns::TopicPattern;
-use crate::session::{Control, Shared};
+use crate::state::Shared;
 
 /// How long a query of the bridges' caches waits for replies.
 const CACHE_QUERY_TIMEOUT: Duration = Duration::from_secs(5);

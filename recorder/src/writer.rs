@@ -22,7 +22,8 @@ use crate::episode::EpisodeWriter;
 use crate::error::{Error, Result};
 use crate::latched::LatchedStore;
 use crate::options::RecorderOptions;
-use crate::session::{now_ns, Event, Item, Shared};
+use crate::report::Event;
+use crate::state::{now_ns, Item, Shared};
 
 mod stop;
 

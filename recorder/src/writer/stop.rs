@@ -10,7 +10,8 @@ use scaledp_schema::EpisodeMetadata;
 
 use super::{episode_file_name, WriterThread};
 use crate::control::Label;
-use crate::session::{now_ns, EpisodeReport, Event};
+use crate::report::{EpisodeReport, Event};
+use crate::state::now_ns;
 
 impl WriterThread {
     pub(super) fn stop(&mut self, outcome: Label) {

@@ -1,7 +1,7 @@
 //! `geometry_msgs` (points, poses, transforms) and `tf2_msgs/TFMessage`, what `/tf` and
 //! `/tf_static` carry.
 
-use super::{Header, RosMessage};
+use super::base::{Header, RosMessage};
 use crate::cdr::{CdrReader, CdrWriter};
 use crate::error::Result;
 

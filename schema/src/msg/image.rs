@@ -1,7 +1,7 @@
 //! Camera streams: raw and compressed images, compressed video, and a cheap look at an image's
 //! size and encoding.
 
-use super::{Header, RosMessage, Time};
+use super::base::{Header, RosMessage, Time};
 use crate::cdr::{CdrReader, CdrWriter};
 use crate::error::Result;
 

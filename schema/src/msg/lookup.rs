@@ -7,7 +7,7 @@
 use std::collections::{BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use super::defs::{definition, own_text, short_name};
+use super::texts::{definition, own_text, short_name};
 
 /// Field types that are not messages (rosbag2's list, and `wstring`).
 const PRIMITIVES: &[&str] = &[
@@ -187,8 +187,8 @@ mod tests {
         );
         assert_eq!(def, want);
         assert_eq!(
-            super::super::StampField::of_definition(&def),
-            super::super::StampField::Leading
+            super::super::stamp::StampField::of_definition(&def),
+            super::super::stamp::StampField::Leading
         );
         // Known types are scaledp's own; unknown ones (or with a missing dependency) are None.
         assert_eq!(

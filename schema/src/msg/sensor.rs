@@ -1,6 +1,6 @@
 //! `sensor_msgs` beside images: joint states and a camera's intrinsics.
 
-use super::{Header, RosMessage};
+use super::base::{Header, RosMessage};
 use crate::cdr::{CdrReader, CdrWriter};
 use crate::error::Result;
 
