@@ -6,6 +6,8 @@
 
 pub mod cli;
 mod commands;
+#[cfg(test)]
+mod docs_commands;
 mod shared;
 mod ui;
 
