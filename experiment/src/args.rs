@@ -127,4 +127,8 @@ pub struct ReportArgs {
     /// Where the results are.
     #[arg(long, default_value = "docs/results")]
     pub results: PathBuf,
+    /// Also rewrite the results summary of this README (between `<!-- results-summary -->` and
+    /// `<!-- /results-summary -->`) from the benchmark's files.
+    #[arg(long)]
+    pub readme: Option<PathBuf>,
 }

@@ -83,6 +83,28 @@ impl EvalFigures {
         }
     }
 
+    /// No episodes: a figure to fill in (pooled counts).
+    pub fn empty() -> Self {
+        EvalFigures {
+            mode: "simulated-time".into(),
+            first_seed: 0,
+            episodes: 0,
+            successes: 0,
+            success_rate: 0.0,
+            wilson_low: 0.0,
+            wilson_high: 1.0,
+            mean_time_to_success_s: None,
+            median_time_to_success_s: None,
+            inference_ms_p50: None,
+            inference_ms_p99: None,
+            e2e_ms_p50: None,
+            wall_s: 0.0,
+            stages: Vec::new(),
+            bridge: None,
+            outcomes: Vec::new(),
+        }
+    }
+
     /// A test fixture: `successes` of `episodes` in simulated time, interval 10–90 %, the
     /// first `successes` seeds the successful ones.
     #[cfg(test)]

@@ -51,12 +51,52 @@ pub fn run(command: ExperimentCommand, stop: &Arc<AtomicBool>) -> Result<()> {
         ExperimentCommand::Report(a) => {
             let dir = a.results.join(&a.name);
             if benchmark::is_benchmark(&dir) {
-                benchmark::rebuild(&dir)
+                benchmark::rebuild(&dir)?;
+                match &a.readme {
+                    Some(readme) => write_summary(readme, &dir),
+                    None => Ok(()),
+                }
             } else {
                 rebuild(&dir).map(|_| ())
             }
         }
     }
+}
+
+/// Where the README's results summary starts and ends.
+pub const SUMMARY_MARKERS: (&str, &str) = ("<!-- results-summary -->", "<!-- /results-summary -->");
+
+/// The README's results summary as `scaledp experiment report --readme` writes it from the
+/// benchmark results in `dir`: the markers and the pooled table between them.
+pub fn readme_summary(dir: &std::path::Path) -> Result<String> {
+    let (start, end) = SUMMARY_MARKERS;
+    let table = benchmark::summary(dir)?;
+    Ok(format!(
+        "{start}\n<!-- written by `scaledp experiment report --name {} --readme README.md` from \
+         docs/results; do not edit -->\n\n{table}\n{end}",
+        dir.file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+    ))
+}
+
+/// Replaces the summary block of `readme` (or the bare start marker) with [`readme_summary`].
+fn write_summary(readme: &std::path::Path, dir: &std::path::Path) -> Result<()> {
+    let text =
+        std::fs::read_to_string(readme).with_context(|| format!("reading {}", readme.display()))?;
+    let (start, end) = SUMMARY_MARKERS;
+    let Some(a) = text.find(start) else {
+        bail!(
+            "{}: no `{start}` line to write the summary at",
+            readme.display()
+        );
+    };
+    let b = text[a..]
+        .find(end)
+        .map_or(a + start.len(), |k| a + k + end.len());
+    let new = format!("{}{}{}", &text[..a], readme_summary(dir)?, &text[b..]);
+    std::fs::write(readme, new).with_context(|| format!("writing {}", readme.display()))?;
+    eprintln!("wrote the results summary of {}", readme.display());
+    Ok(())
 }
 
 /// The command's settings with the defaults of its kind (one dataset, or a benchmark) filled in.

@@ -76,6 +76,7 @@ fn every_committed_result_passes_the_schema_and_its_table_is_rebuilt_from_the_fi
             ExperimentCommand::Report(ReportArgs {
                 name: "r".into(),
                 results: scratch.path().to_path_buf(),
+                readme: None,
             }),
             &stop,
         );
@@ -98,6 +99,27 @@ fn every_committed_result_passes_the_schema_and_its_table_is_rebuilt_from_the_fi
         faults.is_empty(),
         "{checked} files checked:\n{}",
         faults.join("\n")
+    );
+}
+
+/// The README's results summary is what `scaledp experiment report --readme` writes from the
+/// ALOHA results: no figure in it typed by hand.
+#[test]
+fn the_readme_summary_is_rebuilt_from_the_files() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let (start, end) = scaledp_experiment::SUMMARY_MARKERS;
+    let a = readme
+        .find(start)
+        .expect("the README has a results summary");
+    let b = readme[a..]
+        .find(end)
+        .map_or(a + start.len(), |k| a + k + end.len());
+    let want = scaledp_experiment::readme_summary(&results_root().join("aloha")).unwrap();
+    assert_eq!(
+        &readme[a..b],
+        want,
+        "README.md's summary differs: run `scaledp experiment report --name aloha --readme README.md`"
     );
 }
 

@@ -109,3 +109,37 @@ pub struct Earlier<T> {
     /// Who scored them, with what simulator.
     pub audit: Audit,
 }
+
+impl TaskResult {
+    /// A test fixture: `arm` on transfer-cube from `seed`, `successes` of 50 test seeds.
+    #[cfg(test)]
+    pub(crate) fn fixture(arm: &str, seed: u64, successes: u64) -> TaskResult {
+        let test = EvalFigures::counts(successes, 50);
+        TaskResult {
+            benchmark: "aloha".into(),
+            task: "transfer-cube".into(),
+            level: "bimanual".into(),
+            arm: arm.into(),
+            train_seed: seed,
+            what: arm.into(),
+            test_success_rate: test.success_rate,
+            test_seeds: (3_000_000..3_000_050).collect(),
+            wilson_low: 0.1,
+            wilson_high: 0.9,
+            test,
+            train_hours: 1.0,
+            steps: 2500,
+            step_s: 1.3,
+            checkpoint: "ckpt".into(),
+            denoiser_params: 1,
+            encoder_params: 1,
+            demonstrations: 50,
+            command: "c".into(),
+            train_command: "t".into(),
+            train_options: serde_json::Value::Null,
+            audit: crate::audit::Audit::fixture(seed),
+            earlier_scores: Vec::new(),
+            rescore_command: None,
+        }
+    }
+}

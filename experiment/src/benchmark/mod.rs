@@ -11,6 +11,7 @@ mod cells;
 mod chart;
 mod files;
 mod kind;
+mod pooled;
 mod replicates;
 mod report;
 mod rescore;
@@ -28,7 +29,7 @@ use scaledp_schema::{ActionSpace, Rig};
 
 use files::{result_path, run_dir};
 pub use files::{TaskControls, TaskResult};
-pub(crate) use report::{is_benchmark, rebuild};
+pub(crate) use report::{is_benchmark, rebuild, summary};
 use scoring::score_controls;
 
 use crate::arms::Arm;

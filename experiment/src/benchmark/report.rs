@@ -11,6 +11,7 @@ use anyhow::{bail, Context, Result};
 use super::cells::{behaviour, level_of, marked, Level};
 use super::chart::{level_means, plot};
 use super::files::{TaskControls, TaskResult};
+use super::pooled;
 use super::replicates::{cell, pairings, replicates};
 use crate::arms::ARMS;
 use crate::figures::EvalFigures;
@@ -125,6 +126,14 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     }
     let pairings = pairings(&tasks, &arms, &l.results);
     md.push_str(&significance::table(&pairings, true));
+    let task_names: Vec<String> = tasks.iter().map(|(_, t)| t.clone()).collect();
+    let pooled = pooled::table(&task_names, &arms, &l.results);
+    if !pooled.is_empty() {
+        md.push_str(&format!(
+            "\nEach arm's training seeds pooled, read by the rule written in `docs/experiments.md` \
+             before the runs finished (a finding needs p < 0.05 pooled and every seed agreeing):\n\n{pooled}"
+        ));
+    }
     md.push_str(&stages_table(&tasks, &arms, &l));
     if let Some(cited) = super::kind::published(&l.results[0].benchmark) {
         md.push_str(cited);
@@ -274,4 +283,19 @@ fn newest_behaviour(l: &Loaded) -> (u32, bool) {
         .collect();
     let newest = all.iter().copied().max().unwrap_or(1);
     (newest, all.iter().any(|&b| b < newest))
+}
+
+/// The README's results summary: the pooled table of the benchmark results in `dir`.
+pub(crate) fn summary(dir: &Path) -> Result<String> {
+    let l = load(dir)?;
+    let arms = arms_of(&l.results);
+    let mut tasks: Vec<(Level, String)> = l
+        .results
+        .iter()
+        .map(|r| (level_of(&r.level), r.task.clone()))
+        .collect();
+    tasks.sort();
+    tasks.dedup();
+    let names: Vec<String> = tasks.into_iter().map(|(_, t)| t).collect();
+    Ok(pooled::table(&names, &arms, &l.results))
 }
