@@ -4,7 +4,7 @@
 //! image bytes.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use candle_core::Device;
 use scaledp_converter::{convert, read_mcap, ConvertOptions, InMemory};

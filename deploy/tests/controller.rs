@@ -3,7 +3,7 @@
 //! checkpoint that does not fit the rig is one clear error.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use candle_core::Device;
 use glam::DVec3;

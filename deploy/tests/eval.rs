@@ -1,7 +1,7 @@
 //! `scaledp eval` in simulated time: a JSON report over two short episodes, deterministic.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use candle_core::Device;
 use scaledp_deploy::{run_eval, EvalOptions};

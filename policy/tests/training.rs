@@ -2,7 +2,7 @@
 //! episode, and the errors bad inputs give.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] functions
 
-mod common;
+use crate::common;
 
 use candle_core::{Device, Tensor};
 use rand::SeedableRng;
