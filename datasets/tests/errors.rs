@@ -1,7 +1,7 @@
 //! Bad input gives one clear line naming the file (or option) and what is wrong, never a panic.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use common::Fixture;
 use scaledp_datasets::LoaderOptions;

@@ -3,7 +3,7 @@
 //! samples, options too large to allocate, and a resume that fails.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use common::{action_value, state_value, Fixture};
 use scaledp_datasets::{LoaderOptions, LoaderState, Norm, Split};

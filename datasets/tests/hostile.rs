@@ -4,7 +4,7 @@
 //! it with `skip_bad_samples` — a sample left out and counted; never a panic or a hang.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use common::Fixture;
 use scaledp_datasets::LoaderOptions;

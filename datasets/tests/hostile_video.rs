@@ -4,7 +4,7 @@
 //! need the bad file are left out and every other sample of the epoch is there.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeSet;
 use std::sync::Arc;

@@ -3,7 +3,7 @@
 //! rows of the cameras it uses (bytes read per sample measured against the files' own page index).
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use common::{decode_pixel, Fixture};
 use parquet::file::reader::{FileReader, SerializedFileReader};

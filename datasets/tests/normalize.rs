@@ -4,7 +4,7 @@
 //! LeRobot's own example dataset.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use std::collections::HashMap;
 use std::path::Path;

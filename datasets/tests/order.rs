@@ -3,7 +3,7 @@
 //! epochs and seeds change the permutation; splits are disjoint by episode and caps nest.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeMap, BTreeSet};
 

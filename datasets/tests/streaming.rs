@@ -3,7 +3,7 @@
 //! are held at once never exceed what the buffer allows (computed from the options, not timed).
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use std::collections::{BTreeSet, HashMap};
 

@@ -5,7 +5,7 @@
 //! same dataset stored as images; a dataset mixing image and video cameras.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use common::video::{where_is, write_video, VideoWritten};
 use common::{decode_pixel, Fixture};

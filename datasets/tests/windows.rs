@@ -4,7 +4,7 @@
 //! boundaries — both for `window` alone and for the batches the loader builds from Parquet.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+use crate::common;
 
 use common::{action_value, decode_pixel, state_value, Fixture};
 use scaledp_datasets::{window, LoaderOptions, Norm};

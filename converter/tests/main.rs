@@ -1,0 +1,5 @@
+//! The integration tests in one executable (one link of the crate's dependencies instead of one per file).
+
+mod bags;
+mod prefetch;
+mod urdf_fk;
