@@ -2,42 +2,13 @@
 //! protocol (a rig's `[simulator]` table), the built-in `metaworld/<task>` rigs and
 //! MetaWorld's 50 task names by difficulty level.
 
-use std::fmt;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::rig::Rig;
-
-/// Which simulator a rig stands for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SimulatorKind {
-    /// MetaWorld 3.1 (one of its 50 tasks).
-    Metaworld,
-    /// gym-aloha's bimanual tasks.
-    Aloha,
-}
-
-impl fmt::Display for SimulatorKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Self::Metaworld => "metaworld",
-            Self::Aloha => "aloha",
-        })
-    }
-}
-
-/// A rig's `[simulator]`: the simulator and task the bridge runs for it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Simulator {
-    /// The simulator.
-    pub bridge: SimulatorKind,
-    /// Its task, by the simulator's name (`assembly`, `transfer-cube`).
-    pub task: String,
-}
+pub use crate::simulator::{Simulator, SimulatorKind};
 
 /// MetaWorld's difficulty levels (Seo et al. 2023, as the 3D Diffusion Policy paper and the
 /// ScaleDP paper group their tables).

@@ -15,6 +15,7 @@ mod fov;
 pub mod kinematics;
 pub mod msg;
 pub mod rig;
+mod simulator;
 
 pub use action::ActionSpace;
 pub use cdr::{CdrReader, CdrWriter, CDR_BE_HEADER, CDR_LE_HEADER};

@@ -8,12 +8,13 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 mod camera;
+mod listing;
 mod remap;
 mod topics;
 
-pub use crate::benchmarks::{Simulator, SimulatorKind};
 use crate::error::{Error, Result};
 use crate::kinematics::RobotModel;
+pub use crate::simulator::{Simulator, SimulatorKind};
 pub use camera::{Camera, CameraModel, Depth, DepthEncoding, VIDEO_CODECS};
 pub use topics::{ExtraTopic, TfTopics, TopicKind, TopicSpec, CAMERA_INFO, TF_MESSAGE};
 

@@ -30,6 +30,7 @@ pub mod depth;
 mod error;
 pub mod headless;
 pub mod ik;
+pub mod key_style;
 mod latched;
 pub mod messages;
 pub mod operator;
@@ -46,6 +47,7 @@ pub mod world;
 
 pub use error::{Error, Result};
 pub use headless::{run_episode, EpisodeResult, OfflineRun};
+pub use key_style::KeyStyle;
 pub use latched::LatchedCache;
 pub use operator::{ScriptedOperator, LEADER_RATE_HZ};
 pub use pedal::{EpisodeLine, Pedal};
@@ -54,13 +56,3 @@ pub use scene::Scene;
 pub use synth::write_episode;
 pub use task::{CubeState, TaskState, SUCCESS_RADIUS_M};
 pub use world::{ArmCommand, ArmState, World, WorldState};
-
-/// How topics map to Zenoh keys.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum KeyStyle {
-    /// zenoh-bridge-ros2dds: `zed/zed_node/...`, no attachment.
-    #[default]
-    Bridge,
-    /// rmw_zenoh (Humble): `0/<topic>/<pkg::msg::dds_::T_>/TypeHashNotSupported` with attachments.
-    Rmw,
-}

@@ -27,20 +27,19 @@ use zenoh::qos::CongestionControl;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
+use crate::error::{Error, Result};
 use crate::headless::EpisodeResult;
+use crate::key_style::KeyStyle;
 use crate::latched::{LatchedCache, LatchedPublisher};
 use crate::operator::ScriptedOperator;
 use crate::render::View;
 use crate::scene::Scene;
 use crate::task::TaskState;
 use crate::world::{ArmCommand, World, WorldState};
-use crate::{Error, KeyStyle, Result};
-
-/// Called with (topic, payload) for every message just before it is published.
-pub type PublishHook = Arc<dyn Fn(&str, &[u8]) + Send + Sync>;
 
 mod workers;
 
+pub use workers::PublishHook;
 pub(crate) use workers::Shared;
 use workers::{lock, on_command, operator_loop, world_loop, OperatorSlot};
 

@@ -15,11 +15,10 @@ use scaledp_schema::ActionSpace;
 use serde::Deserialize;
 
 use crate::columns::{image_bytes, ints, strings, vectors};
-use crate::episode::{log_rows, predicted_rows, Rows};
+use crate::episode::{log_rows, predicted_rows, Prediction, Rows};
 use crate::error::{Error, Result};
 use crate::images::encoded_frame;
 use crate::layout;
-use crate::session::Prediction;
 
 /// Rows per batch read for images.
 const IMAGE_BATCH: usize = 16;

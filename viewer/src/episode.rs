@@ -319,3 +319,13 @@ pub(crate) fn predicted_rows(
         .map(|f| at.get(f).map(|&i| values[i * per..(i + 1) * per].to_vec()))
         .collect())
 }
+
+/// A policy's predicted action chunks over one dataset episode (what `scaledp_policy`'s
+/// `predict_episode` gives), drawn beside the recorded chunk.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Prediction {
+    /// The frame (`frame_index`) each chunk was predicted at.
+    pub frames: Vec<i64>,
+    /// `[frames, C, A]` in the dataset's raw units, A = the dataset's action dimensions.
+    pub values: Vec<f32>,
+}

@@ -63,9 +63,10 @@ mod sink;
 mod space;
 mod ticks;
 
+pub use episode::Prediction;
 pub use error::{Error, Result};
 pub use input::{classify, InputKind};
 pub use live::{LiveOptions, RecordView, TopicFigures};
 pub use runs::{RolloutView, TrainingView};
-pub use session::{view, Prediction, Shown, Summary, ViewOptions, Viewer};
+pub use session::{view, Shown, Summary, ViewOptions, Viewer};
 pub use sink::{Target, APPLICATION_ID};

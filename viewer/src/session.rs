@@ -11,6 +11,7 @@ use scaledp_schema::rig::Rig;
 use scaledp_schema::ActionSpace;
 
 use crate::dataset::Dataset;
+use crate::episode::Prediction;
 use crate::error::{Error, Result};
 use crate::input::{classify, directory_inputs, InputKind};
 use crate::layout;
@@ -40,16 +41,6 @@ impl Default for ViewOptions {
             action_space: ActionSpace::Tcp,
         }
     }
-}
-
-/// A policy's predicted action chunks over one dataset episode (what `scaledp_policy`'s
-/// `predict_episode` gives), drawn beside the recorded chunk.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Prediction {
-    /// The frame (`frame_index`) each chunk was predicted at.
-    pub frames: Vec<i64>,
-    /// `[frames, C, A]` in the dataset's raw units, A = the dataset's action dimensions.
-    pub values: Vec<f32>,
 }
 
 /// What one episode showed.

@@ -13,12 +13,14 @@ use serde::Serialize;
 use zenoh::sample::Sample;
 use zenoh::Wait;
 
-use super::PublishHook;
 use crate::messages;
 use crate::operator::{ScriptedOperator, LEADER_RATE_HZ};
 use crate::scene::Scene;
 use crate::task::TaskState;
 use crate::world::{ArmCommand, ArmState, World, WorldState};
+
+/// Called with (topic, payload) for every message just before it is published.
+pub type PublishHook = Arc<dyn Fn(&str, &[u8]) + Send + Sync>;
 
 /// The operator and when it is due to begin.
 pub(crate) struct OperatorSlot {
