@@ -64,8 +64,11 @@ step "cargo fmt --check"
 # same packages, so its dependencies are these artifacts too. The `tests` crate lists every
 # dev-dependency as a normal one, so building tests adds no features to a shared crate and
 # nothing compiles twice.
-cargo build --release --workspace --all-targets --locked
+cargo build --release --workspace --all-targets --locked --timings
 step "cargo build --release"
+# Where the build went (the slowest units, our test executables' share): the report is
+# target/cargo-timings/cargo-timing.html.
+python3 scripts/timings.py target/cargo-timings/cargo-timing.html 15 || true
 
 # Check mode in the release profile: build scripts and proc-macros are the ones just built.
 cargo clippy --release --workspace --all-targets --locked -- -D warnings
