@@ -298,6 +298,16 @@ impl EpisodeWriter {
         }
     }
 
+    /// Writes a metadata record (e.g. the episode's verdict) before the end record.
+    pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
+        let w = self.writer.as_mut().ok_or(Error::Stopped)?;
+        w.write_metadata(&mcap::records::Metadata {
+            name: name.into(),
+            metadata,
+        })
+        .map_err(Error::mcap(&self.partial))
+    }
+
     /// Writes `metadata` as the `scaledp.episode` record, the summary section and the end magic,
     /// syncs, and renames the file to `dest` (normally the path given to `create`).
     pub fn finish(

@@ -28,7 +28,9 @@ impl Control {
     /// Queues a command behind every message received so far.
     pub fn send(&self, cmd: Command) {
         match cmd {
-            Command::Start => self.shared.recording.store(true, Relaxed),
+            Command::Start | Command::ForceStart | Command::Rerecord => {
+                self.shared.recording.store(true, Relaxed)
+            }
             Command::Toggle => {
                 let on = self
                     .shared
@@ -38,7 +40,11 @@ impl Control {
                     .unwrap_or(true);
                 self.shared.recording.store(on, Relaxed);
             }
-            Command::Stop(_) | Command::Quit => self.shared.recording.store(false, Relaxed),
+            // Messages stop being queued at once; the writer closes the episode behind them.
+            Command::Stop(_) | Command::End | Command::Quit => {
+                self.shared.recording.store(false, Relaxed)
+            }
+            Command::Keep | Command::Task(_) => {}
         }
         let _ = self.tx.send(Item::Command(cmd));
     }
@@ -50,6 +56,7 @@ impl Control {
         let len = s.payload().len();
         counters.received.fetch_add(1, Relaxed);
         counters.bytes.fetch_add(len as u64, Relaxed);
+        counters.last_ns.store(log_time_ns, Relaxed);
         let att = s.attachment().and_then(RmwAttachment::parse);
         let source_ns = att
             .as_ref()

@@ -32,33 +32,42 @@
 mod channels;
 mod checks;
 mod control;
+mod disk;
 mod episode;
 mod error;
 mod intake;
+mod judge;
 pub mod keys;
 mod latched;
 mod links;
+mod liveness;
 pub mod net;
 mod options;
 mod patterns;
+mod pilot;
 mod recover;
 mod report;
 mod session;
 mod state;
 mod subscribe;
+mod verdict;
 mod writer;
 
-pub use control::{Command, Label};
+pub use control::{Command, Label, CONTROL_WORDS};
+pub use disk::{DiskStatus, FreeSpace, DEFAULT_EPISODE_S};
 pub use episode::{
     partial_path, ChannelSpec, Compression, EpisodeOptions, EpisodeSummary, EpisodeWriter,
     OFFERED_QOS_LATCHED_YAML, OFFERED_QOS_YAML,
 };
 pub use error::{Error, Result};
 pub use intake::Control;
+pub use liveness::{LiveState, Liveness, TopicLive, SLOW_FRACTION};
 pub use options::RecorderOptions;
 pub use patterns::{parse_message_type, TopicPattern};
+pub use pilot::{Phase, Pilot, Plan};
 pub use recover::{default_output, recover, RecoverySummary};
 pub use report::{EpisodeReport, Event, Status, TopicStatus};
 pub use session::Recorder;
 pub use state::now_ns;
+pub use verdict::{TopicVerdict, Verdict, STARTED_WITH_MISSING_TOPICS, VERDICT_RECORD};
 pub use writer::episode_file_name;

@@ -6,6 +6,7 @@ use std::time::Duration;
 use scaledp_schema::msg::MsgSearch;
 use scaledp_schema::rig::Rig;
 
+use crate::disk::{DiskOptions, FreeSpace};
 use crate::episode::{Compression, EpisodeOptions};
 use crate::patterns::TopicPattern;
 
@@ -23,12 +24,16 @@ pub struct RecorderOptions {
     pub(crate) bridge_namespace: String,
     pub(crate) patterns: Vec<TopicPattern>,
     pub(crate) msg_search: MsgSearch,
+    pub(crate) check_topics: bool,
+    pub(crate) disk: DiskOptions,
 }
 
 impl RecorderOptions {
     /// Records every topic of `rig` into `out_dir`. Defaults: LZ4 chunks of 8 MiB, a 1 GiB
     /// queue, a flush every 500 ms, control on `scaledp/recorder/control`, no bridge namespace,
-    /// no further topics, only scaledp's own message definitions.
+    /// no further topics, only scaledp's own message definitions, starts whatever the topics do
+    /// (their state is noted in the episode), the disk guard on (statvfs, episodes assumed as
+    /// long as the longest so far, a warning below 5 minutes of room).
     pub fn new(rig: Rig, out_dir: impl Into<PathBuf>) -> Self {
         Self {
             rig,
@@ -42,6 +47,8 @@ impl RecorderOptions {
             bridge_namespace: String::new(),
             patterns: Vec::new(),
             msg_search: MsgSearch::new(),
+            check_topics: false,
+            disk: DiskOptions::default(),
         }
     }
     /// The task instruction stored with every episode, e.g. "put the cup on the plate".
@@ -96,6 +103,35 @@ impl RecorderOptions {
     /// `--msg-path`).
     pub fn msg_search(mut self, search: MsgSearch) -> Self {
         self.msg_search = search;
+        self
+    }
+    /// Refuse a [`crate::Command::Start`] while a rig topic is missing or slow (see
+    /// [`crate::Liveness`]); [`crate::Command::ForceStart`] starts anyway. Off by default:
+    /// unattended sessions start and note what was missing in the episode.
+    pub fn check_topics(mut self, yes: bool) -> Self {
+        self.check_topics = yes;
+        self
+    }
+    /// The disk guard (on by default): refuse to start an episode the output disk has no room
+    /// for, and end one before the disk is full.
+    pub fn disk_guard(mut self, on: bool) -> Self {
+        self.disk.enabled = on;
+        self
+    }
+    /// The length of the session's episodes (s), what the disk guard makes room for (default:
+    /// the longest episode so far, 60 s before the first).
+    pub fn episode_time(mut self, seconds: Option<f64>) -> Self {
+        self.disk.episode_s = seconds.filter(|s| *s > 0.0);
+        self
+    }
+    /// Warn when the output disk holds less than this many minutes of recording (default 5).
+    pub fn disk_warn_minutes(mut self, minutes: f64) -> Self {
+        self.disk.warn_minutes = minutes.max(0.0);
+        self
+    }
+    /// Where the disk guard gets the free space from (a test's full disk).
+    pub fn free_space(mut self, free: FreeSpace) -> Self {
+        self.disk.free_space = free;
         self
     }
 }

@@ -4,7 +4,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::control::Label;
+use crate::disk::DiskStatus;
 use crate::episode::EpisodeSummary;
+use crate::verdict::Verdict;
 
 /// Live figures for one topic, counted since the session opened.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -30,9 +32,18 @@ pub struct Status {
     pub topics: Vec<TopicStatus>,
     /// Payload bytes waiting for the writer.
     pub queued_bytes: usize,
+    /// The episode that ended and waits for a label, keep, discard or re-record.
+    pub held: Option<u64>,
+    /// The task of the episodes started from now on.
+    pub task: String,
+    /// The output disk as the guard last saw it (None with the guard off).
+    pub disk: Option<DiskStatus>,
 }
 
 /// What happened to an episode.
+// A few events per episode: their size does not matter, and a boxed report would only make
+// every reader dereference it.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum Event {
     /// A new episode file was opened.
@@ -42,8 +53,37 @@ pub enum Event {
         /// The `.partial` file.
         path: PathBuf,
     },
+    /// An episode stopped recording and is held for a decision (see `Command::End`): its
+    /// verdict.
+    Ended {
+        /// Episode index.
+        index: u64,
+        /// Whether convert would take it.
+        verdict: Verdict,
+    },
     /// An episode was closed and renamed into place.
     Finished(EpisodeReport),
+    /// An episode finished earlier was moved to `discarded/` (a discard or re-record after it
+    /// was labelled).
+    Discarded {
+        /// Episode index.
+        index: u64,
+        /// Where it is now.
+        path: PathBuf,
+    },
+    /// A start was refused.
+    Refused {
+        /// The line saying why.
+        reason: String,
+        /// The topics missing or slow, one line each (empty for a refusal of the disk guard).
+        problems: Vec<String>,
+        /// Whether `Command::ForceStart` would start it (topics missing, not a full disk).
+        force: bool,
+    },
+    /// The task of the episodes started from now on changed.
+    Task(String),
+    /// Less than the warning's minutes of recording are left on the output disk.
+    DiskLow(String),
     /// Writing an episode failed; its `.partial` file is left for `scaledp recover`.
     Failed {
         /// Episode index.
@@ -77,4 +117,12 @@ pub struct EpisodeReport {
     /// What the recorder noticed, one line each, naming the topic (depth in an undeclared
     /// encoding, a `camera_info` of another size, a latched topic with nothing to write).
     pub warnings: Vec<String>,
+    /// Whether convert would take it, and the figures behind it.
+    pub verdict: Verdict,
+    /// Why the recorder ended it itself (the disk about to be full), if it did.
+    pub cut: Option<String>,
+    /// Topics missing or slow when it started (it was started anyway).
+    pub started_with_missing_topics: Vec<String>,
+    /// Bytes of the file.
+    pub file_bytes: u64,
 }

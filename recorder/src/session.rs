@@ -18,6 +18,7 @@ use crate::control::Command;
 use crate::error::{Error, Result};
 use crate::intake::Control;
 use crate::links::LinkWatch;
+use crate::liveness::Liveness;
 use crate::options::RecorderOptions;
 use crate::report::{Event, Status, TopicStatus};
 use crate::state::Shared;
@@ -37,7 +38,7 @@ impl RecorderOptions {
             .map(|t| Channel::resolve(t.clone(), &mut search))
             .collect();
         let session = crate::net::open(config)?;
-        let shared = Arc::new(Shared::new(&topics, self.queue_bytes));
+        let shared = Arc::new(Shared::new(&topics, self.queue_bytes, &self.task));
         let (tx, rx) = crossbeam_channel::unbounded();
         let control = Control::new(tx, shared.clone());
         let ns = self.bridge_namespace.clone();
@@ -165,7 +166,15 @@ impl Recorder {
             episode,
             topics,
             queued_bytes: self.shared.queued_bytes.load(Relaxed),
+            held: self.shared.held.lock().ok().and_then(|h| *h),
+            task: self.shared.task(),
+            disk: self.shared.disk.lock().ok().and_then(|d| d.clone()),
         }
+    }
+    /// Whether the rig's topics are live at their rates now (what a start checks with
+    /// [`RecorderOptions::check_topics`]).
+    pub fn liveness(&self) -> Liveness {
+        self.shared.liveness()
     }
     /// True while the writer thread runs (it stops after `quit`).
     pub fn is_running(&self) -> bool {

@@ -10,6 +10,8 @@ use scaledp_schema::rig::TopicSpec;
 use zenoh::bytes::ZBytes;
 
 use crate::control::Command;
+use crate::disk::DiskStatus;
+use crate::liveness::{self, Liveness, Observed, RateWindow, Rates};
 
 #[derive(Default)]
 pub(crate) struct Counters {
@@ -17,6 +19,8 @@ pub(crate) struct Counters {
     pub bytes: AtomicU64,
     pub dropped: AtomicU64,
     pub upstream_gaps: AtomicU64,
+    /// Receive time of the latest message (ns since the epoch; 0 before the first).
+    pub last_ns: AtomicU64,
 }
 
 /// A topic of the session and its figures.
@@ -45,10 +49,18 @@ pub(crate) struct Shared {
     pub bridge_types: Mutex<HashMap<String, String>>,
     pub last_sequence: Mutex<HashMap<(usize, Vec<u8>), i64>>,
     pub active: Mutex<Option<(u64, Instant)>>,
+    /// The episode that ended and waits for a label, keep, discard or re-record.
+    pub held: Mutex<Option<u64>>,
+    /// Counter snapshots of the last seconds, for rates (taken by the writer).
+    pub window: Mutex<RateWindow>,
+    /// The task of the episodes started from now on.
+    pub task: Mutex<String>,
+    /// The disk guard's latest figures.
+    pub disk: Mutex<Option<DiskStatus>>,
 }
 
 impl Shared {
-    pub(crate) fn new(topics: &[TopicSpec], max_queued_bytes: usize) -> Self {
+    pub(crate) fn new(topics: &[TopicSpec], max_queued_bytes: usize, task: &str) -> Self {
         Self {
             links: AtomicUsize::new(0),
             outages: AtomicU64::new(0),
@@ -77,6 +89,10 @@ impl Shared {
             bridge_types: Mutex::default(),
             last_sequence: Mutex::default(),
             active: Mutex::new(None),
+            held: Mutex::new(None),
+            window: Mutex::default(),
+            task: Mutex::new(task.to_string()),
+            disk: Mutex::new(None),
         }
     }
 
@@ -91,6 +107,53 @@ impl Shared {
     /// The counters of topic `i`.
     pub(crate) fn counters_of(&self, i: usize) -> Option<Arc<Counters>> {
         self.topics.read().ok()?.get(i).map(|e| e.counters.clone())
+    }
+
+    /// Takes a snapshot of the counters for rates (kept when 200 ms after the previous one).
+    pub(crate) fn snapshot(&self) {
+        let received = self.counters(|c| c.received.load(Relaxed));
+        let bytes = self.counters(|c| c.bytes.load(Relaxed));
+        if let Ok(mut w) = self.window.lock() {
+            w.push(Instant::now(), received, bytes);
+        }
+    }
+
+    /// Rates over the last seconds, when a snapshot is there to measure from.
+    pub(crate) fn rates(&self) -> Option<Rates> {
+        let received = self.counters(|c| c.received.load(Relaxed));
+        let bytes = self.counters(|c| c.bytes.load(Relaxed));
+        self.window
+            .lock()
+            .ok()?
+            .rates(Instant::now(), &received, &bytes)
+    }
+
+    /// The liveness of the rig's topics now.
+    pub(crate) fn liveness(&self) -> Liveness {
+        let rates = self.rates();
+        let Ok(topics) = self.topics.read() else {
+            return Liveness::default();
+        };
+        let specs: Vec<TopicSpec> = topics.iter().map(|e| e.spec.clone()).collect();
+        let pick = |f: fn(&Counters) -> &AtomicU64| -> Vec<u64> {
+            topics
+                .iter()
+                .map(|e| f(&e.counters).load(Relaxed))
+                .collect()
+        };
+        liveness::judge(&Observed {
+            specs: &specs,
+            rig_topics: self.rig_topics,
+            received: &pick(|c| &c.received),
+            last_ns: &pick(|c| &c.last_ns),
+            rates: rates.as_ref(),
+            now_ns: now_ns(),
+        })
+    }
+
+    /// The task of the episodes started from now on.
+    pub(crate) fn task(&self) -> String {
+        self.task.lock().map(|t| t.clone()).unwrap_or_default()
     }
 
     /// Link outages so far: (count, total ns, an ongoing one included).

@@ -2,10 +2,11 @@
 //! commands into episode files with their metadata. It keeps the latest message of every
 //! latched publisher and writes them at the start of every episode (`log_time` the episode's
 //! start, `publish_time` when they were published), and it notes what it sees wrong in the
-//! cameras' streams (see [`crate::checks`]).
+//! cameras' streams (see [`crate::checks`]). Starting (its checks: topics live, room on disk)
+//! is in `start`, ending, holding and finishing an episode in `stop`.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::Arc;
 use std::time::Instant;
@@ -18,14 +19,20 @@ use zenoh::Wait;
 use crate::channels::Channel;
 use crate::checks::Checks;
 use crate::control::{Command, Label};
+use crate::disk::DiskGuard;
 use crate::episode::EpisodeWriter;
-use crate::error::{Error, Result};
+use crate::error::Error;
+use crate::judge::Evidence;
 use crate::latched::LatchedStore;
 use crate::options::RecorderOptions;
 use crate::report::Event;
-use crate::state::{now_ns, Item, Shared};
+use crate::state::{Item, Shared};
 
+mod closed;
+mod start;
 mod stop;
+
+use closed::Closed;
 
 struct Active {
     index: u64,
@@ -45,6 +52,10 @@ struct Active {
     latched_at_start: BTreeMap<String, u64>,
     /// What was noticed, each once.
     warnings: BTreeSet<String>,
+    /// What the verdict looks at.
+    evidence: Evidence,
+    /// Topics missing or slow when it started.
+    prestart: Vec<String>,
 }
 
 pub(crate) struct WriterThread {
@@ -56,8 +67,13 @@ pub(crate) struct WriterThread {
     session: zenoh::Session,
     next_index: u64,
     active: Option<Active>,
+    /// Ended, waiting for a label, keep, discard or re-record.
+    held: Option<Closed>,
+    /// The episode finished last (index, file), while a discard may still move it.
+    last_finished: Option<(u64, PathBuf)>,
     latched: LatchedStore,
     checks: Checks,
+    disk: DiskGuard,
 }
 
 /// The first index not used by any `episode_NNNNNN.mcap[.partial]` in `dir` or `dir/discarded`.
@@ -104,6 +120,7 @@ impl WriterThread {
         let next_index = next_free_index(&opts.out_dir);
         let specs: Vec<_> = channels.iter().map(|c| c.spec.clone()).collect();
         let checks = Checks::new(&opts.rig, &specs);
+        let disk = DiskGuard::new(opts.disk.clone());
         Self {
             opts,
             channels,
@@ -113,8 +130,11 @@ impl WriterThread {
             session,
             next_index,
             active: None,
+            held: None,
+            last_finished: None,
             latched: LatchedStore::default(),
             checks,
+            disk,
         }
     }
 
@@ -140,6 +160,7 @@ impl WriterThread {
                     let added = self.active.as_mut().map(|a| {
                         a.awaiting_keyframe.push(false);
                         a.before_keyframe.push(0);
+                        a.evidence.push_topic();
                         a.writer.add_channel(&channel.channel)
                     });
                     self.channels.push(channel);
@@ -149,6 +170,9 @@ impl WriterThread {
                 }
                 Ok(Item::Command(Command::Quit)) | Err(RecvTimeoutError::Disconnected) => {
                     self.stop(Label::Unlabeled);
+                    if let Some(held) = self.held.take() {
+                        self.finalize(held, Label::Unlabeled);
+                    }
                     break;
                 }
                 Ok(Item::Command(cmd)) => self.handle(cmd),
@@ -158,6 +182,7 @@ impl WriterThread {
                 if let Some(Err(e)) = self.active.as_mut().map(|a| a.writer.flush()) {
                     self.fail(e);
                 }
+                self.tick();
                 next_flush = Instant::now() + every;
             }
         }
@@ -176,12 +201,8 @@ impl WriterThread {
             return;
         };
         // publish_time = the capture stamp; else the sender's clock; else when it arrived.
-        let publish = ch
-            .stamp
-            .read(data)
-            .map(|t| t.as_ns())
-            .or(source_ns)
-            .unwrap_or(log_time_ns);
+        let header = ch.stamp.read(data).map(|t| t.as_ns());
+        let publish = header.or(source_ns).unwrap_or(log_time_ns);
         if ch.spec.latched && !self.latched.update(topic, gid, data, publish) {
             return; // already kept, and written at the start of the open episode
         }
@@ -199,118 +220,87 @@ impl WriterThread {
         if let Some(p) = problem {
             a.warnings.insert(p);
         }
-        if let Err(e) = a.writer.write(topic, log_time_ns, publish, data) {
-            self.fail(e);
+        match a.writer.write(topic, log_time_ns, publish, data) {
+            Ok(()) => a.evidence.message(topic, header, log_time_ns, data),
+            Err(e) => self.fail(e),
         }
     }
 
     fn handle(&mut self, cmd: Command) {
-        match (cmd, self.active.is_some()) {
-            (Command::Start | Command::Toggle, false) => self.start(),
-            (Command::Stop(outcome), true) => self.stop(outcome),
-            (Command::Toggle, true) => self.stop(Label::Unlabeled),
-            (cmd, open) => tracing::debug!(?cmd, open, "command ignored in this state"),
+        let open = self.active.is_some();
+        match cmd {
+            Command::Start | Command::Toggle if !open => self.start(false),
+            Command::ForceStart if !open => self.start(true),
+            Command::Toggle => self.stop(Label::Unlabeled),
+            Command::Stop(label) if open => self.stop(label),
+            Command::Stop(label) => match self.held.take() {
+                Some(held) => self.finalize(held, label),
+                None if label == Label::Discarded => self.discard_last(),
+                None => tracing::debug!(?label, "no episode to label"),
+            },
+            Command::End if open => self.end(),
+            Command::Keep => match self.held.take() {
+                Some(held) => self.finalize(held, Label::Unlabeled),
+                None => tracing::debug!("no episode held to keep"),
+            },
+            Command::Rerecord => {
+                if open {
+                    self.stop(Label::Discarded);
+                } else if let Some(held) = self.held.take() {
+                    self.finalize(held, Label::Discarded);
+                } else {
+                    self.discard_last();
+                }
+                self.start(false);
+            }
+            Command::Task(task) => self.set_task(task),
+            cmd => tracing::debug!(?cmd, open, "command ignored in this state"),
         }
     }
 
-    fn start(&mut self) {
-        let index = self.next_index;
-        self.next_index += 1;
-        let path = self.opts.out_dir.join(episode_file_name(index));
-        let started_ns = now_ns();
-        let start_meta = EpisodeMetadata {
-            episode_index: Some(index),
-            task: self.opts.task.clone(),
-            operator: self.opts.operator.clone(),
-            rig_name: self.opts.rig.name.clone(),
-            rig_toml: toml::to_string(&self.opts.rig).ok(),
-            start_time_ns: Some(started_ns),
-            recorder_version: Some(env!("CARGO_PKG_VERSION").into()),
-            ..EpisodeMetadata::default()
-        };
-        let channels: Vec<_> = self.channels.iter().map(|c| c.channel.clone()).collect();
-        // The output directory is (re)created for every episode: one removed while the session
-        // runs costs the episode being written, not the ones after it.
-        let created = std::fs::create_dir_all(&self.opts.out_dir)
-            .map_err(Error::io(&self.opts.out_dir))
-            .and_then(|()| {
-                self.opts
-                    .episode
-                    .create_channels(&path, &channels, start_meta.start_record())
-            });
-        let writer = match created {
-            Ok(w) => w,
-            Err(e) => {
-                self.shared.recording.store(false, Relaxed);
-                tracing::error!("episode {index}: {e}");
-                let _ = self.events.send(Event::Failed {
-                    index,
-                    error: e.to_string(),
-                });
-                return;
-            }
-        };
-        let partial = writer.partial_path().to_path_buf();
-        let n = self.channels.len();
-        self.active = Some(Active {
-            index,
-            writer,
-            started: Instant::now(),
-            start_meta,
-            dropped_at_start: self.shared.counters(|c| c.dropped.load(Relaxed)),
-            gaps_at_start: self.shared.counters(|c| c.upstream_gaps.load(Relaxed)),
-            outages_at_start: self.shared.outage_figures(),
-            awaiting_keyframe: self
-                .channels
-                .iter()
-                .map(|c| c.spec.message_type == CompressedVideo::TYPE_NAME)
-                .collect(),
-            before_keyframe: vec![0; n],
-            latched_at_start: BTreeMap::new(),
-            warnings: BTreeSet::new(),
-        });
-        if let Err(e) = self.write_latched(index, started_ns) {
-            self.fail(e);
+    /// The task of the episodes started from now on.
+    fn set_task(&mut self, task: String) {
+        tracing::info!(task, "task of the next episodes");
+        if let Ok(mut t) = self.shared.task.lock() {
+            t.clone_from(&task);
+        }
+        self.publish_status(&serde_json::json!({"event": "task", "task": task}));
+        self.opts.task.clone_from(&task);
+        let _ = self.events.send(Event::Task(task));
+    }
+
+    /// Every flush: counters for rates, the disk's figures, and an episode ended before the
+    /// disk is full.
+    fn tick(&mut self) {
+        self.shared.snapshot();
+        let live = self.shared.rates().map(|r| r.bytes_per_s);
+        let (status, low) = self.disk.status(&self.opts.out_dir, live);
+        if let Ok(mut d) = self.shared.disk.lock() {
+            d.clone_from(&status);
+        }
+        if let (Some(line), Some(s)) = (low, status) {
+            tracing::warn!("{line}");
+            self.publish_status(&serde_json::json!({
+                "event": "disk", "free_bytes": s.free_bytes, "minutes_left": s.minutes_left,
+                "line": line,
+            }));
+            let _ = self.events.send(Event::DiskLow(line));
+        }
+        let Some(file) = self
+            .active
+            .as_ref()
+            .map(|a| a.writer.partial_path().to_path_buf())
+        else {
             return;
-        }
-        if let Ok(mut a) = self.shared.active.lock() {
-            *a = Some((index, Instant::now()));
-        }
-        tracing::info!(index, path = %partial.display(), "episode started");
-        self.publish_status(&serde_json::json!({"event": "started", "episode": index}));
-        let _ = self.events.send(Event::Started {
-            index,
-            path: partial,
-        });
-    }
-
-    /// Writes what every latched topic holds at the episode's start; a latched topic with
-    /// nothing yet is a warning (it is written as soon as it arrives).
-    fn write_latched(&mut self, index: u64, started_ns: u64) -> Result<()> {
-        let Some(a) = self.active.as_mut() else {
-            return Ok(());
         };
-        for (i, ch) in self.channels.iter().enumerate() {
-            if !ch.spec.latched {
-                continue;
-            }
-            let mut n = 0;
-            for l in self.latched.of(i) {
-                a.writer.write(i, started_ns, l.publish_ns, &l.payload)?;
-                n += 1;
-            }
-            a.latched_at_start.insert(ch.spec.topic.clone(), n);
-            if n == 0 {
-                let w = format!(
-                    "{}: nothing latched at the start of the episode (its publisher not up, \
-                     or not serving late joiners); written when it arrives",
-                    ch.spec.topic
-                );
-                tracing::warn!("episode {index}: {w}");
-                a.warnings.insert(w);
+        if let Some(cut) = self.disk.check_running(&self.opts.out_dir, &file, live) {
+            tracing::error!("{cut}");
+            if let Some(mut closed) = self.close() {
+                closed.warnings.push(cut.clone());
+                closed.cut = Some(cut);
+                self.finalize(closed, Label::Unlabeled);
             }
         }
-        Ok(())
     }
 
     fn fail(&mut self, e: Error) {

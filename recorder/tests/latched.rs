@@ -69,7 +69,7 @@ fn next_finished(recorder: &Recorder) -> EpisodeReport {
         match recorder.events().recv_timeout(left).unwrap() {
             Event::Finished(r) => return r,
             Event::Failed { error, .. } => panic!("{error}"),
-            Event::Started { .. } => {}
+            _ => {}
         }
     }
 }

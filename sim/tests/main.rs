@@ -4,3 +4,6 @@ mod aloha;
 mod bridge;
 mod live;
 mod record_convert;
+mod record_rig;
+mod record_session;
+mod record_verdict;

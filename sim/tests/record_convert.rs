@@ -158,7 +158,7 @@ fn a_recorded_operator_episode_carries_its_commands_and_converts_them_to_actions
         {
             Event::Finished(r) => break r,
             Event::Failed { error, .. } => panic!("{error}"),
-            Event::Started { .. } => {}
+            _ => {}
         }
     };
     recorder.finish().unwrap();

@@ -42,7 +42,7 @@ fn next_finished(recorder: &Recorder) -> EpisodeReport {
         match recorder.events().recv_timeout(left) {
             Ok(Event::Finished(r)) => return r,
             Ok(Event::Failed { error, .. }) => panic!("episode failed: {error}"),
-            Ok(Event::Started { .. }) => {}
+            Ok(_) => {}
             Err(e) => panic!("no episode finished: {e}"),
         }
     }

@@ -99,7 +99,7 @@ fn next_finished(recorder: &Recorder) -> EpisodeReport {
         match recorder.events().recv_timeout(left).unwrap() {
             Event::Finished(r) => return r,
             Event::Failed { error, .. } => panic!("episode failed: {error}"),
-            Event::Started { .. } => {}
+            _ => {}
         }
     }
 }

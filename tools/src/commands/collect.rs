@@ -115,7 +115,7 @@ pub fn run(args: CollectArgs) -> Result<ExitStatus> {
                     failed += 1;
                     break;
                 }
-                Ok(Event::Started { .. }) => {}
+                Ok(_) => {}
                 Err(_) => break,
             }
         }

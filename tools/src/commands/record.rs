@@ -200,8 +200,9 @@ fn keyboard(
             KeyCode::Char('q') | KeyCode::Esc => Command::Quit,
             _ => continue,
         };
+        let quit = cmd == Command::Quit;
         recorder.send(cmd);
-        if cmd == Command::Quit {
+        if quit {
             break;
         }
     }

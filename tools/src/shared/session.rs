@@ -80,6 +80,15 @@ pub fn drain(recorder: &Recorder, tally: &mut Tally, eol: &str) -> bool {
                 }
                 ended = true;
             }
+            Event::Ended { index, verdict } => {
+                eprint!("episode {index} ended: {}{eol}", verdict.line());
+            }
+            Event::Discarded { index, path } => {
+                eprint!("episode {index} moved to {}{eol}", path.display());
+            }
+            Event::Refused { reason, .. } => eprint!("{reason}{eol}"),
+            Event::Task(task) => eprint!("task: {task}{eol}"),
+            Event::DiskLow(line) => eprint!("{line}{eol}"),
         }
     }
     ended

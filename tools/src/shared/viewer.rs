@@ -88,6 +88,13 @@ pub mod live {
                     r.index, r.outcome, r.duration_s
                 ),
                 Event::Failed { index, error } => format!("episode {index} failed: {error}"),
+                Event::Ended { index, verdict } => {
+                    format!("episode {index} ended: {}", verdict.line())
+                }
+                Event::Discarded { index, .. } => format!("episode {index} discarded"),
+                Event::Refused { reason, .. } => reason.clone(),
+                Event::Task(task) => format!("task: {task}"),
+                Event::DiskLow(line) => line.clone(),
             });
         }
         if tap.last_status.elapsed() >= Duration::from_millis(250) {
