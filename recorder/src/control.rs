@@ -31,13 +31,16 @@ pub enum Command {
     Toggle,
     /// The task instruction of the episodes started from now on.
     Task(String),
+    /// The next of the session's tasks ([`crate::RecorderOptions::tasks`]), after the last the
+    /// first again.
+    NextTask,
     /// Close the session, finishing an open episode as `unlabeled`.
     Quit,
 }
 
 /// The words the Zenoh control key takes, for messages.
 pub const CONTROL_WORDS: &str =
-    "start, force, stop, end, toggle, success, failure, discard, keep, rerecord, task <text>, quit";
+    "start, force, stop, end, toggle, success, failure, discard, keep, rerecord, task <text>, next-task, quit";
 
 impl FromStr for Command {
     type Err = String;
@@ -71,6 +74,7 @@ impl FromStr for Command {
             "discard" => Self::Stop(Label::Discarded),
             "keep" => Self::Keep,
             "rerecord" | "re-record" | "redo" => Self::Rerecord,
+            "next-task" => Self::NextTask,
             "quit" => Self::Quit,
             other => return Err(format!("unknown command '{other}' ({CONTROL_WORDS})")),
         })
@@ -87,6 +91,7 @@ mod tests {
         assert_eq!("start".parse(), Ok(Command::Start));
         assert_eq!("FORCE".parse(), Ok(Command::ForceStart));
         assert_eq!("re-record".parse(), Ok(Command::Rerecord));
+        assert_eq!("Next-Task".parse(), Ok(Command::NextTask));
         assert_eq!(
             "task  Stack the Cups \n".parse(),
             Ok(Command::Task("Stack the Cups".into()))

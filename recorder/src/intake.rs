@@ -44,7 +44,7 @@ impl Control {
             Command::Stop(_) | Command::End | Command::Quit => {
                 self.shared.recording.store(false, Relaxed)
             }
-            Command::Keep | Command::Task(_) => {}
+            Command::Keep | Command::Task(_) | Command::NextTask => {}
         }
         let _ = self.tx.send(Item::Command(cmd));
     }

@@ -16,6 +16,7 @@ pub struct RecorderOptions {
     pub(crate) rig: Rig,
     pub(crate) out_dir: PathBuf,
     pub(crate) task: String,
+    pub(crate) tasks: Vec<String>,
     pub(crate) operator: String,
     pub(crate) episode: EpisodeOptions,
     pub(crate) queue_bytes: usize,
@@ -39,6 +40,7 @@ impl RecorderOptions {
             rig,
             out_dir: out_dir.into(),
             task: String::new(),
+            tasks: Vec::new(),
             operator: String::new(),
             episode: EpisodeOptions::new(),
             queue_bytes: 1 << 30,
@@ -54,6 +56,15 @@ impl RecorderOptions {
     /// The task instruction stored with every episode, e.g. "put the cup on the plate".
     pub fn task(mut self, task: impl Into<String>) -> Self {
         self.task = task.into();
+        self
+    }
+    /// Several tasks for the session: the first is recorded first, [`crate::Command::NextTask`]
+    /// moves on to the next (after the last, the first again).
+    pub fn tasks<S: Into<String>>(mut self, tasks: impl IntoIterator<Item = S>) -> Self {
+        self.tasks = tasks.into_iter().map(Into::into).collect();
+        if let Some(first) = self.tasks.first() {
+            self.task.clone_from(first);
+        }
         self
     }
     /// Who teleoperated.

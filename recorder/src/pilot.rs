@@ -6,8 +6,9 @@
 //! start of the next when the reset is over and the rig's topics are live.
 //!
 //! In an attended session an episode ends held (`Command::End`) so it can still be labelled,
-//! kept or discarded during the reset, and one that `scaledp convert` would reject holds the
-//! next start until the operator keeps it or records it again.
+//! kept or discarded during the reset; with someone at the keyboard (`confirm`), one that
+//! `scaledp convert` would reject holds the next start until the operator keeps it or records
+//! it again.
 
 use std::time::{Duration, Instant};
 
@@ -29,8 +30,11 @@ pub struct Plan {
     /// Seconds between an episode's end and the next start (only with `episode_s`).
     pub reset_s: f64,
     /// An operator is there: episodes end held for a label, the next starts only once the
-    /// topics are live, and an episode convert would reject waits for keep or re-record.
+    /// topics are live, and discarded episodes do not count.
     pub attended: bool,
+    /// Someone at the keyboard answers: an episode convert would reject waits for keep or
+    /// re-record before the next starts.
+    pub confirm: bool,
 }
 
 /// Where a session is.
@@ -84,6 +88,8 @@ pub struct Pilot {
     kept: u64,
     failed: u64,
     done: Option<String>,
+    /// The session could not go on.
+    stopped: Option<String>,
 }
 
 impl Pilot {
@@ -102,6 +108,7 @@ impl Pilot {
             kept: 0,
             failed: 0,
             done: None,
+            stopped: None,
         }
     }
 
@@ -114,6 +121,12 @@ impl Pilot {
     /// in an unattended session.
     pub fn done(&self) -> Option<&str> {
         self.done.as_deref()
+    }
+
+    /// Why the session ended before its plan did: an unattended session's episode that could not
+    /// be written, or a start the disk guard refused.
+    pub fn stopped(&self) -> Option<&str> {
+        self.stopped.as_deref()
     }
 
     fn timed(&self) -> bool {
@@ -178,7 +191,7 @@ impl Pilot {
                 self.after_episode();
                 self.keep_sent = false;
                 self.held = Some(*index);
-                if self.plan.attended {
+                if self.plan.confirm {
                     self.decide = verdict.reason.clone().map(|r| (*index, r));
                 }
             }
@@ -194,7 +207,7 @@ impl Pilot {
                 }
                 if r.outcome != Label::Discarded {
                     self.kept += 1;
-                    if was_recording && self.plan.attended && r.cut.is_none() {
+                    if was_recording && self.plan.confirm && r.cut.is_none() {
                         self.decide = r.verdict.reason.clone().map(|x| (r.index, x));
                     }
                 }
@@ -211,12 +224,15 @@ impl Pilot {
                 self.after_episode();
                 if !opened && !self.plan.attended && self.timed() {
                     // Its file could not even be opened: the next would fail alike.
-                    self.done = Some(format!("episode {index} could not be written"));
+                    let why = format!("episode {index} could not be written");
+                    self.done = Some(why.clone());
+                    self.stopped = Some(why);
                 }
             }
             Event::Refused { reason, force, .. } => {
                 if !force && !self.plan.attended {
                     self.done = Some(reason.clone());
+                    self.stopped = Some(reason.clone());
                 }
                 self.waiting = Some(reason.clone());
                 self.retry_at = Some(Instant::now() + RETRY);

@@ -254,6 +254,14 @@ impl WriterThread {
                 self.start(false);
             }
             Command::Task(task) => self.set_task(task),
+            Command::NextTask => {
+                let tasks = &self.opts.tasks;
+                let at = tasks.iter().position(|t| *t == self.opts.task);
+                match at.map_or(tasks.first(), |i| tasks.get((i + 1) % tasks.len())) {
+                    Some(next) => self.set_task(next.clone()),
+                    None => tracing::warn!("next-task: the session was given no list of tasks"),
+                }
+            }
             cmd => tracing::debug!(?cmd, open, "command ignored in this state"),
         }
     }

@@ -118,6 +118,7 @@ fn a_timed_attended_session_takes_control_words_in_both_phases_and_discards_do_n
         episode_s: Some(1.0),
         reset_s: 0.8,
         attended: true,
+        confirm: false,
     });
     let control = |word: &str| {
         let key = format!("{prefix}/control");

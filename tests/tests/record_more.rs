@@ -230,7 +230,9 @@ fn record_command_reports_queue_drops_and_exits_3() {
 }
 
 /// An operator at the terminal: `scaledp record` on a pseudo-terminal (`tests/py/pty_keys.py`)
-/// with no `--no-keyboard`, driven by keys only. Space starts, `y` ends as success, space starts
+/// with no `--no-keyboard`, driven by keys only. Space is refused while the rig's topics are
+/// silent (the line names them), `f` starts anyway, `y` ends as success; the verdict (twenty
+/// messages a topic within 20 ms: no two ticks) asks keep or re-record, `k` keeps; `f` starts
 /// again, `d` discards, `q` quits; the status key, the files and the terminal all agree.
 #[test]
 fn keys_on_a_terminal_start_end_discard_and_quit() {
@@ -278,30 +280,43 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
         std::thread::sleep(Duration::from_millis(20));
     }
     let mut keys = driver.0.as_mut().unwrap().stdin.take().unwrap();
-    let mut press = |key: &str| {
+    // One key at a time: the driver reads its stdin line by line as select() wakes it, so two
+    // lines written together would leave the second waiting for the next.
+    let press = |keys: &mut std::process::ChildStdin, key: &str| {
         use std::io::Write;
         writeln!(keys, "{key}").unwrap();
         keys.flush().unwrap();
+        std::thread::sleep(Duration::from_millis(150));
     };
     let per_topic = 20;
-    let mut episode = |end_key: &str, index: u64, outcome: &str| {
-        press("space");
-        let started = wait_status(&statuses, "started");
-        assert_eq!(started["episode"], index);
-        for k in 0..per_topic {
-            for (t, p) in topics.iter().zip(&publishers) {
-                p.put(numbered_message(t, k)).wait().unwrap();
+    press(&mut keys, "space");
+    let refused = wait_status(&statuses, "refused");
+    assert_eq!(refused["force"], true);
+    let problems = refused["problems"].as_array().unwrap();
+    assert_eq!(problems.len(), topics.len(), "{refused}");
+    let episode =
+        |keys: &mut std::process::ChildStdin, end_key: &str, index: u64, outcome: &str| {
+            press(keys, "f");
+            let started = wait_status(&statuses, "started");
+            assert_eq!(started["episode"], index);
+            for k in 0..per_topic {
+                for (t, p) in topics.iter().zip(&publishers) {
+                    p.put(numbered_message(t, k)).wait().unwrap();
+                }
             }
-        }
-        press(end_key);
-        let finished = wait_status(&statuses, "finished");
-        assert_eq!(finished["episode"], index);
-        assert_eq!(finished["outcome"], outcome);
-        finished
-    };
-    let kept = episode("y", 0, "success");
-    episode("d", 1, "discarded");
-    press("q");
+            // The key takes the terminal, the data the Zenoh link: give the data a head start.
+            std::thread::sleep(Duration::from_millis(300));
+            press(keys, end_key);
+            let finished = wait_status(&statuses, "finished");
+            assert_eq!(finished["episode"], index);
+            assert_eq!(finished["outcome"], outcome);
+            finished
+        };
+    let kept = episode(&mut keys, "y", 0, "success");
+    assert_eq!(kept["verdict"]["accepted"], false, "{kept}");
+    press(&mut keys, "k");
+    episode(&mut keys, "d", 1, "discarded");
+    press(&mut keys, "q");
     drop(keys); // end of keys: the driver now waits for the exit
     let output = driver.0.take().unwrap().wait_with_output().unwrap();
     assert!(output.status.success());
@@ -309,8 +324,18 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
     let screen = run["output"].as_str().unwrap();
     assert_eq!(run["returncode"], 0, "{screen}");
 
-    // The terminal: the key help, a status line, one line per episode, the session total.
+    // The terminal: the key help, the refusal and how to start anyway, the verdict and its
+    // question, a status line, one line per episode, the session total.
     assert!(screen.contains("[space] start/stop"), "{screen}");
+    for said in [
+        "episode 0 not started, topics not live: ",
+        "[f] starts it anyway",
+        "episode 0: convert would reject it: ",
+        "convert would reject it: [k] keep it, [r] record it again",
+        "; 1 kept",
+    ] {
+        assert!(screen.contains(said), "{said:?} not in {screen}");
+    }
     let kept_path = out.join("episode_000000.mcap");
     let discarded_path = out.join("discarded/episode_000001.mcap");
     for (path, outcome) in [(&kept_path, "success"), (&discarded_path, "discarded")] {
@@ -331,6 +356,9 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
     assert_eq!(meta["outcome"], "success");
     assert_eq!(meta["operator"], "kb");
     assert_eq!(meta["task"], "keys");
+    let missing: Vec<String> =
+        serde_json::from_str(&meta[scaledp_recorder::STARTED_WITH_MISSING_TOPICS]).unwrap();
+    assert_eq!(missing.len(), topics.len(), "{missing:?}");
     let counts: BTreeMap<String, u64> = serde_json::from_str(&meta["message_counts"]).unwrap();
     assert_eq!(kept["messages"], serde_json::to_value(&counts).unwrap());
     let in_file = messages_per_topic(&kept_path);
@@ -338,7 +366,7 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
         // Keys and data travel different paths, so a message put just before `y` may land
         // after the stop; each topic holds some and at most what was sent.
         let n = in_file.get(&t.topic).copied().unwrap_or(0);
-        assert!((1..=per_topic).contains(&n), "{}: {n}", t.topic);
+        assert!((1..=per_topic).contains(&n), "{}: {n} {screen}", t.topic);
         assert_eq!(counts[&t.topic], n, "{}", t.topic);
     }
 }

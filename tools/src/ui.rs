@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use scaledp_recorder::Status;
+use scaledp_recorder::{Phase, Status};
 use scaledp_schema::Rig;
 
 /// Logs go to stderr; `-v` / `-vv` raise the level, `-q` lowers it, `RUST_LOG` overrides both.
@@ -68,15 +68,60 @@ impl StatusLine {
 
     /// The line for `now` (rates since the previous call).
     pub fn render(&mut self, now: Status) -> String {
-        let t = Instant::now();
-        let mut parts = Vec::new();
-        parts.push(match now.episode {
-            Some((i, start)) => {
-                let s = start.elapsed().as_secs_f64();
-                format!("● REC #{i} {:02}:{:04.1}", (s / 60.0) as u64, s % 60.0)
-            }
+        let head = match now.episode {
+            Some((i, start)) => format!("● REC #{i} {}", clock(start.elapsed().as_secs_f64())),
             None => "○ idle".to_string(),
-        });
+        };
+        self.line(head, now)
+    }
+
+    /// The line of a session the pilot steers: its phase (with the countdown of a timed
+    /// session), the task, the disk when it runs low, then the figures.
+    pub fn render_phase(&mut self, now: Status, phase: &Phase) -> String {
+        let mut head = match phase {
+            Phase::Recording {
+                index,
+                elapsed_s,
+                left_s,
+            } => match left_s {
+                Some(left) => format!(
+                    "● REC #{index} {} │ {} left",
+                    clock(*elapsed_s),
+                    clock(*left)
+                ),
+                None => format!("● REC #{index} {}", clock(*elapsed_s)),
+            },
+            Phase::Reset { held, left_s } => {
+                let next = if *left_s > 0.0 {
+                    format!("◌ RESET {} → next", clock(*left_s))
+                } else {
+                    "◌ between episodes".to_string()
+                };
+                match held {
+                    Some(i) => format!("{next} │ #{i} ended: [y]/[n] label [d] discard [r] redo"),
+                    None => next,
+                }
+            }
+            Phase::Decide { index, .. } => {
+                format!("⚠ #{index} convert would reject it: [k] keep [r] re-record")
+            }
+            Phase::Waiting(why) => format!("⏸ {}", shorten(why, 90)),
+            Phase::Idle => "○ idle".to_string(),
+            Phase::Done => "■ done".to_string(),
+        };
+        head.push_str(&format!(" │ task: {}", shorten(&now.task, 40)));
+        if let Some(d) = now.disk.as_ref().filter(|d| d.low) {
+            head.push_str(&format!(
+                " │ DISK {:.1} min left",
+                d.minutes_left.unwrap_or(0.0)
+            ));
+        }
+        self.line(head, now)
+    }
+
+    fn line(&mut self, head: String, now: Status) -> String {
+        let t = Instant::now();
+        let mut parts = vec![head];
         let (mut mbps, mut dropped) = (0.0, 0);
         for (i, topic) in now.topics.iter().enumerate() {
             dropped += topic.dropped + topic.upstream_gaps;
@@ -101,4 +146,19 @@ impl StatusLine {
         self.last = Some((t, now));
         parts.join(" │ ")
     }
+}
+
+/// `mm:ss.s`.
+fn clock(s: f64) -> String {
+    format!("{:02}:{:04.1}", (s / 60.0) as u64, s % 60.0)
+}
+
+/// `text` cut to `n` characters, with an ellipsis when cut.
+fn shorten(text: &str, n: usize) -> String {
+    if text.chars().count() <= n {
+        return text.to_string();
+    }
+    let mut out: String = text.chars().take(n.saturating_sub(1)).collect();
+    out.push('…');
+    out
 }

@@ -15,18 +15,43 @@ pub struct RecordArgs {
     /// Directory for episode_NNNNNN.mcap files (numbering continues after existing ones).
     #[arg(long)]
     pub out: PathBuf,
-    /// The task instruction stored with each episode.
-    #[arg(long)]
-    pub task: String,
+    /// The task instruction stored with each episode. Given several times, the first is
+    /// recorded first and `t` (or the control word `next-task`) moves on to the next; given
+    /// once, `t` asks for a new one between episodes (`task <text>` on the control key sets any).
+    #[arg(long, required = true, value_name = "TEXT")]
+    pub task: Vec<String>,
     /// Who teleoperates (default: $USER).
     #[arg(long)]
     pub operator: Option<String>,
-    /// Record this many episodes, then exit.
+    /// Record this many episodes, then exit (discarded and re-recorded ones do not count).
     #[arg(long)]
     pub episodes: Option<u64>,
-    /// Stop each episode after this many seconds (unattended runs).
+    /// A timed, attended session: each episode ends after this many seconds (earlier with a
+    /// key or control word), held for a label during the reset.
+    #[arg(long, value_name = "SECONDS", conflicts_with = "duration")]
+    pub episode_time: Option<f64>,
+    /// With --episode-time: seconds between an episode's end and the next start (a countdown
+    /// in the status line; [space] starts at once).
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = 10.0,
+        requires = "episode_time"
+    )]
+    pub reset_time: f64,
+    /// An unattended run: each episode ends after this many seconds, unlabelled, and the next
+    /// starts at once; no keyboard, no prompts.
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
+    /// Warn (status line and status key) when the output disk holds less than this many
+    /// minutes of recording.
+    #[arg(long, value_name = "MINUTES", default_value_t = 5.0)]
+    pub disk_warn_minutes: f64,
+    /// Start episodes whatever the free space on the output disk, and let a full disk fail the
+    /// episode being written (the disk guard refuses an episode that cannot fit and ends one
+    /// before the disk is full).
+    #[arg(long)]
+    pub no_disk_guard: bool,
     /// Chunk compression.
     #[arg(long, value_enum, default_value = "lz4")]
     pub compression: CompressionArg,
@@ -45,7 +70,8 @@ pub struct RecordArgs {
     /// Seconds to wait for every topic to be live before an unattended run starts.
     #[arg(long, default_value_t = 10.0)]
     pub wait_topics: f64,
-    /// Never read the keyboard, even on a terminal (control over Zenoh only).
+    /// Never read the keyboard, even on a terminal (control over Zenoh only; starts are then
+    /// not held back by missing topics, which each episode lists instead).
     #[arg(long)]
     pub no_keyboard: bool,
     /// Stream what is recorded (downsampled images, joints, rates and drops) to a rerun viewer:

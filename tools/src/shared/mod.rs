@@ -3,6 +3,7 @@
 //! session's tally and timer, scoring, input locations (paths or `s3://` URLs), and the rerun
 //! viewer glue.
 
+pub mod attend;
 mod control;
 mod scoring;
 mod session;
@@ -13,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use crate::cli::{CompressionArg, NetArgs};
 pub use control::{rig_for, ControlArgs};
 pub use scoring::{wilson_interval, Successes};
-pub use session::{drain, timed_episodes, wait_for_topics, Tally};
+pub use session::{timed_episodes, wait_for_topics};
 
 /// A command-line path or `s3://` URL (convert, merge and recover take either).
 pub fn location(arg: &std::path::Path) -> Result<scaledp_converter::Location> {

@@ -23,9 +23,24 @@ pub struct Tally {
     pub started: Vec<u64>,
     /// An episode failed before its file could be opened (the output cannot be written).
     pub unstartable: Option<u64>,
+    /// Finished episodes moved to `discarded/` afterwards (a discard or re-record after a label).
+    pub moved: Vec<u64>,
+    /// Episodes that ended held for a decision (their verdict was said then).
+    pub held: Vec<u64>,
+    /// The last refusal said.
+    pub last_refusal: Option<String>,
+    /// Why the session ended before its plan did.
+    pub stopped: Option<String>,
 }
 
 impl Tally {
+    /// Episodes kept: finished, not discarded, not moved to `discarded/` since.
+    pub fn kept(&self) -> usize {
+        self.finished
+            .iter()
+            .filter(|r| r.outcome != Label::Discarded && !self.moved.contains(&r.index))
+            .count()
+    }
     /// Messages lost over the session (queue drops and upstream gaps).
     pub fn lost(&self) -> u64 {
         self.finished
@@ -58,40 +73,73 @@ pub fn print_finished(r: &EpisodeReport, eol: &str) {
 
 /// Handles pending events; returns true when an episode finished or failed.
 pub fn drain(recorder: &Recorder, tally: &mut Tally, eol: &str) -> bool {
-    let mut ended = false;
     viewer::live::update(recorder, None);
+    let mut ended = false;
     while let Ok(ev) = recorder.events().try_recv() {
-        viewer::live::update(recorder, Some(&ev));
-        match ev {
-            Event::Started { index, path } => {
-                tracing::debug!(index, path = %path.display(), "started");
-                tally.started.push(index);
-            }
-            Event::Finished(r) => {
-                print_finished(&r, eol);
-                tally.finished.push(r);
-                ended = true;
-            }
-            Event::Failed { index, error } => {
-                eprint!("episode {index} failed: {error}{eol}");
-                tally.failed += 1;
-                if !tally.started.contains(&index) {
-                    tally.unstartable = Some(index);
-                }
-                ended = true;
-            }
-            Event::Ended { index, verdict } => {
-                eprint!("episode {index} ended: {}{eol}", verdict.line());
-            }
-            Event::Discarded { index, path } => {
-                eprint!("episode {index} moved to {}{eol}", path.display());
-            }
-            Event::Refused { reason, .. } => eprint!("{reason}{eol}"),
-            Event::Task(task) => eprint!("task: {task}{eol}"),
-            Event::DiskLow(line) => eprint!("{line}{eol}"),
-        }
+        ended |= show(recorder, &ev, tally, eol);
     }
     ended
+}
+
+/// Counts one event, feeds it to the live view and prints what the operator reads of it: a line
+/// on stdout per finished episode, its verdict and what went wrong on stderr. Returns true when
+/// an episode finished or failed.
+pub fn show(recorder: &Recorder, ev: &Event, tally: &mut Tally, eol: &str) -> bool {
+    viewer::live::update(recorder, Some(ev));
+    match ev {
+        Event::Started { index, path } => {
+            tracing::debug!(index, path = %path.display(), "started");
+            tally.started.push(*index);
+            tally.last_refusal = None;
+            false
+        }
+        Event::Ended { index, verdict } => {
+            tally.held.push(*index);
+            eprint!("episode {index} ended, {}{eol}", verdict.line());
+            false
+        }
+        Event::Finished(r) => {
+            print_finished(r, eol);
+            // Said at its end already when it was held.
+            if !tally.held.contains(&r.index) {
+                eprint!("episode {}: {}{eol}", r.index, r.verdict.line());
+            }
+            if let Some(cut) = &r.cut {
+                eprint!("{cut}{eol}");
+            }
+            tally.finished.push(r.clone());
+            true
+        }
+        Event::Failed { index, error } => {
+            eprint!("episode {index} failed: {error}{eol}");
+            tally.failed += 1;
+            if !tally.started.contains(index) {
+                tally.unstartable = Some(*index);
+            }
+            true
+        }
+        Event::Discarded { index, path } => {
+            tally.moved.push(*index);
+            eprint!("episode {index} moved to {}{eol}", path.display());
+            false
+        }
+        Event::Refused { reason, .. } => {
+            // A refusal repeated while nothing changes is said once.
+            if tally.last_refusal.as_ref() != Some(reason) {
+                eprint!("{reason}{eol}");
+                tally.last_refusal = Some(reason.clone());
+            }
+            false
+        }
+        Event::Task(task) => {
+            eprint!("task of the next episodes: {task}{eol}");
+            false
+        }
+        Event::DiskLow(line) => {
+            eprint!("{line}{eol}");
+            false
+        }
+    }
 }
 
 /// Waits (at most `timeout_s`) until every topic has delivered a message; warns about the rest.
