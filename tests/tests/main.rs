@@ -21,6 +21,7 @@ mod metaworld_e2e;
 mod python_module;
 mod record_e2e;
 mod record_more;
+mod record_session;
 mod record_topics;
 mod record_topics_cli;
 mod schema_interop;
