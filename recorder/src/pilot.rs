@@ -282,10 +282,11 @@ impl Pilot {
         if self.plan.attended {
             let live = recorder.liveness();
             if !live.is_ready() {
-                self.waiting = Some(format!(
-                    "waiting for topics: {}",
-                    live.problems().join("; ")
-                ));
+                let why = format!("waiting for topics: {}", live.problems().join("; "));
+                if self.waiting.as_ref() != Some(&why) {
+                    tracing::info!("{why}");
+                }
+                self.waiting = Some(why);
                 self.retry_at = Some(now + Duration::from_millis(250));
                 return;
             }
