@@ -263,9 +263,10 @@ impl Pilot {
                 self.done = Some(format!("{} episodes kept", self.kept));
             } else if self.decide.is_none()
                 && !self.keep_sent
-                && self.reset_until.is_none_or(|t| now >= t)
+                && self.reset_until.is_some_and(|t| now >= t)
             {
-                // Nothing more to record: the held episode is kept once its reset is over.
+                // Nothing more to record: the held episode is kept once its reset is over (in
+                // a session without a timer it waits for its label, keep, discard or quit).
                 recorder.send(Command::Keep);
                 self.keep_sent = true;
             }
