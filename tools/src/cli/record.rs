@@ -28,7 +28,7 @@ pub struct RecordArgs {
     pub episodes: Option<u64>,
     /// A timed, attended session: each episode ends after this many seconds (earlier with a
     /// key or control word), held for a label during the reset.
-    #[arg(long, value_name = "SECONDS", conflicts_with = "duration")]
+    #[arg(long, value_name = "SECONDS", conflicts_with = "duration", value_parser = positive_seconds)]
     pub episode_time: Option<f64>,
     /// With --episode-time: seconds between an episode's end and the next start (a countdown
     /// in the status line; [space] starts at once).
@@ -36,12 +36,13 @@ pub struct RecordArgs {
         long,
         value_name = "SECONDS",
         default_value_t = 10.0,
-        requires = "episode_time"
+        requires = "episode_time",
+        value_parser = seconds
     )]
     pub reset_time: f64,
     /// An unattended run: each episode ends after this many seconds, unlabelled, and the next
     /// starts at once; no keyboard, no prompts.
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = positive_seconds)]
     pub duration: Option<f64>,
     /// Warn (status line and status key) when the output disk holds less than this many
     /// minutes of recording.
@@ -95,6 +96,22 @@ pub struct RecordArgs {
     /// Network settings; by default a peer connecting to tcp/127.0.0.1:7447.
     #[command(flatten)]
     pub net: NetArgs,
+}
+
+/// A duration in seconds, 0 or more.
+fn seconds(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        _ => Err(format!("'{s}' is not a number of seconds (0 or more)")),
+    }
+}
+
+/// A duration in seconds, more than 0.
+fn positive_seconds(s: &str) -> Result<f64, String> {
+    match seconds(s) {
+        Ok(x) if x > 0.0 => Ok(x),
+        _ => Err(format!("'{s}' is not a number of seconds above 0")),
+    }
 }
 
 fn parse_topic_pattern(s: &str) -> Result<scaledp_recorder::TopicPattern, String> {
