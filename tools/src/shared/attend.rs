@@ -87,7 +87,11 @@ fn read_task(current: &str, eol: &str) -> Option<String> {
 
 /// The status line cut to the terminal's width (a wrapped line would not be redrawn in place).
 fn fit(line: String) -> String {
-    let cols = crossterm::terminal::size().map_or(200, |(c, _)| usize::from(c));
+    // A terminal that does not say its size (a bare pseudo-terminal says 0) gets 200 columns.
+    let cols = match crossterm::terminal::size() {
+        Ok((c, _)) if c > 0 => usize::from(c),
+        _ => 200,
+    };
     if line.chars().count() < cols {
         return line;
     }
@@ -111,7 +115,13 @@ pub fn run(recorder: &Recorder, plan: Plan, how: Attended<'_>) -> Result<Tally> 
     let mut last_draw = Instant::now() - Duration::from_secs(1);
     while !how.stop.load(Ordering::Relaxed) {
         viewer::live::update(recorder, None);
-        for ev in pilot.poll(recorder) {
+        let events = pilot.poll(recorder);
+        if show_line && !events.is_empty() {
+            // The events' lines replace the status line, which is drawn again below them.
+            eprint!("\r\x1b[2K");
+            let _ = std::io::stderr().flush();
+        }
+        for ev in events {
             if show(recorder, &ev, &mut tally, eol) && how.keyboard {
                 eprint!("{KEYS_HELP}{eol}");
             }
