@@ -25,6 +25,9 @@ pub(crate) fn scaledp_convert(
         .arg(out)
         .arg("--jobs")
         .arg(jobs.to_string())
+        // The generated recordings are unlabelled (too short for the scripted operator to
+        // finish) and hold the training streams only (no depth).
+        .args(["--unlabeled", "keep", "--no-depth"])
         .args(extra);
     tracing::info!("running {c:?}");
     let m = measure(c, None).context("running scaledp convert")?;

@@ -66,7 +66,13 @@ pub(crate) fn s3_route(recordings: &Path, jobs: usize, venv: &Venv) -> Result<Ro
             "--out",
             "s3://data/bench/ds",
         ])
-        .args(["--jobs", &jobs.to_string()])
+        .args([
+            "--jobs",
+            &jobs.to_string(),
+            "--unlabeled",
+            "keep",
+            "--no-depth",
+        ])
         .env("AWS_ENDPOINT_URL", &moto.endpoint)
         .env("AWS_ACCESS_KEY_ID", "testing")
         .env("AWS_SECRET_ACCESS_KEY", "testing")

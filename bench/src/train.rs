@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use candle_core::Device;
-use scaledp_converter::{ConvertOptions, InputResult, JobOptions};
+use scaledp_converter::{ConvertOptions, InputResult, JobOptions, Unlabeled};
 use scaledp_policy::bench::{
     ddim_latency, synthetic_step_profile, train_throughput, write_torch_case,
 };
@@ -282,10 +282,15 @@ fn make_dataset(work: &Path, args: &BenchTrainArgs, size: Option<(u32, u32)>) ->
         &paths,
         &dataset,
         &JobOptions::default()
-            .convert(size.map_or(ConvertOptions::default(), |(w, h)| {
-                ConvertOptions::default().size(w, h)
-            }))
-            .overwrite(true),
+            // The simulator's recordings hold the training streams only (no depth).
+            .convert(
+                size.map_or(ConvertOptions::default(), |(w, h)| {
+                    ConvertOptions::default().size(w, h)
+                })
+                .depth(false),
+            )
+            .overwrite(true)
+            .unlabeled(Unlabeled::Keep),
         &|_| {},
     )?;
     for (path, r) in &results {

@@ -13,7 +13,7 @@ use crate::destination::Destination;
 use crate::error::{Error, Result};
 use crate::inputs::shard;
 use crate::objects::Input;
-use crate::options::JobOptions;
+use crate::options::{JobOptions, Unlabeled};
 pub use crate::per_input::InputResult;
 use crate::per_input::{convert_input, Episodes, Existing};
 
@@ -66,6 +66,16 @@ pub fn run_inputs(
         }
         None => inputs.to_vec(),
     };
+    if opts.unlabeled == Unlabeled::Refuse {
+        let unlabeled = crate::labels::unlabeled_inputs(&inputs);
+        if !unlabeled.is_empty() {
+            let line = crate::labels::refusal(&unlabeled);
+            return Err(Error::Unlabeled {
+                inputs: unlabeled,
+                line,
+            });
+        }
+    }
     if let (Location::Object(_), Some(_)) = (out, opts.convert.video) {
         return Err(Error::input(
             out.as_path(),

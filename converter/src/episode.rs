@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::frames::FrameStore;
 use crate::kinematics::ArmKinematics;
 pub use crate::options::ConvertOptions;
+pub use crate::recorded::Recorded;
 use crate::series::{messages_of, unwrap_pose_angles, JointSeries};
 use crate::source::Recording;
 
@@ -58,6 +59,8 @@ pub struct Episode {
     pub report: AlignmentReport,
     /// `header.stamp` or `log_time`.
     pub time_source: String,
+    /// Operator, label and verdict (see [`Recorded`]).
+    pub recorded: Recorded,
 }
 
 impl Episode {
@@ -302,6 +305,8 @@ pub fn convert(
                 .cloned()
         })
         .collect();
+    let meta = crate::detect::episode_metadata(path, rec)?;
+    let recorded = crate::recorded::recorded(&rec.metadata, meta.as_ref(), &aligned.report, fps);
     Ok(Episode {
         source: path.into(),
         task,
@@ -324,5 +329,6 @@ pub fn convert(
         } else {
             "header.stamp".into()
         },
+        recorded,
     })
 }

@@ -42,6 +42,15 @@ pub enum Error {
         /// Why.
         reason: String,
     },
+    /// The job has unlabelled inputs and was not told whether to keep or skip them
+    /// ([`crate::Unlabeled::Refuse`]); nothing was converted. The message lists them.
+    #[error("{line}")]
+    Unlabeled {
+        /// The unlabelled inputs.
+        inputs: Vec<PathBuf>,
+        /// The refusal in one line.
+        line: String,
+    },
     /// Object storage failed (no such bucket, refused credentials, access denied, the network
     /// after the retries); the message names the URL.
     #[error(transparent)]

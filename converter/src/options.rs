@@ -195,9 +195,23 @@ impl Default for ConvertOptions {
     }
 }
 
+/// What a job does with an episode recorded without a success or failure label (`stop`
+/// rather than a label, an unattended or timed recording, a foreign bag: none has one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Unlabeled {
+    /// No choice made: [`crate::run`] refuses the job, naming the unlabelled inputs, before it
+    /// converts anything (an input it could not read a label from ahead fails alone).
+    #[default]
+    Refuse,
+    /// Converted, stored with label `unlabeled` (`scaledp/label` in `meta/episodes/`).
+    Keep,
+    /// Left out, reported as skipped.
+    Skip,
+}
+
 /// Settings of a conversion job, set with chained setters. Defaults: [`ConvertOptions`]'s
 /// defaults, no overwrite, no shard, one job per core, data files of 100 MiB, `failure`
-/// episodes skipped, no split.
+/// episodes skipped, unlabelled ones refused ([`Unlabeled::Refuse`]), no split.
 ///
 /// ```no_run
 /// use scaledp_converter::{ConvertOptions, JobOptions};
@@ -215,6 +229,7 @@ pub struct JobOptions {
     pub(crate) jobs: usize,
     pub(crate) file_size_mib: u64,
     pub(crate) include_failures: bool,
+    pub(crate) unlabeled: Unlabeled,
     pub(crate) split_gap_s: Option<f64>,
     pub(crate) work_dir: Option<std::path::PathBuf>,
 }
@@ -228,6 +243,7 @@ impl Default for JobOptions {
             jobs: std::thread::available_parallelism().map_or(2, usize::from),
             file_size_mib: 100,
             include_failures: false,
+            unlabeled: Unlabeled::Refuse,
             split_gap_s: None,
             work_dir: None,
         }
@@ -265,6 +281,11 @@ impl JobOptions {
     /// Also convert episodes whose recorded outcome is `failure`.
     pub fn include_failures(mut self, yes: bool) -> Self {
         self.include_failures = yes;
+        self
+    }
+    /// What to do with episodes recorded without a label (see [`Unlabeled`]).
+    pub fn unlabeled(mut self, policy: Unlabeled) -> Self {
+        self.unlabeled = policy;
         self
     }
     /// Split an input into several episodes wherever no message was logged for `seconds`.

@@ -18,7 +18,7 @@ use crate::inputs::{content_hash, hasher_for, is_mcap_file, read_input, useful_t
 use crate::lerobot::EpisodeRecord;
 use crate::mcap_remote::RemoteMcap;
 use crate::objects::{download, Input, ObjectInput};
-use crate::options::{ConvertOptions, JobOptions};
+use crate::options::{ConvertOptions, JobOptions, Unlabeled};
 use crate::source::Recording;
 
 /// What happened to one input of a [`crate::run`].
@@ -274,24 +274,35 @@ fn guarded(
     })
 }
 
-/// Skips episodes the operator marked as discarded or failed.
+/// Skips episodes the operator marked as discarded or failed, and unlabelled ones as the job
+/// says ([`Unlabeled`]).
 fn check_outcome(
     path: &Path,
     rec: &Recording,
     opts: &JobOptions,
 ) -> std::result::Result<(), InputResult> {
-    let label = crate::detect::episode_metadata(path, rec)
-        .map_err(InputResult::Failed)?
-        .and_then(|m| m.label);
-    match label {
-        Some(Label::Discarded) => {
-            return Err(InputResult::Skipped("recorded outcome: discarded".into()))
-        }
-        Some(Label::Failure) if !opts.include_failures => {
+    let meta = crate::detect::episode_metadata(path, rec).map_err(InputResult::Failed)?;
+    match crate::recorded::label_of(meta.as_ref()) {
+        Label::Discarded => return Err(InputResult::Skipped("recorded outcome: discarded".into())),
+        Label::Failure if !opts.include_failures => {
             return Err(InputResult::Skipped(
                 "recorded outcome: failure (see --include-failures)".into(),
             ))
         }
+        Label::Unlabeled => match opts.unlabeled {
+            Unlabeled::Keep => {}
+            Unlabeled::Skip => {
+                return Err(InputResult::Skipped("unlabelled (--unlabeled skip)".into()))
+            }
+            Unlabeled::Refuse => {
+                return Err(InputResult::Failed(Error::Rejected {
+                    path: path.into(),
+                    reason: "unlabelled (recorded without a success or failure label): choose \
+                             --unlabeled keep or --unlabeled skip"
+                        .into(),
+                }))
+            }
+        },
         _ => {}
     }
     Ok(())

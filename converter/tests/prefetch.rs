@@ -330,11 +330,15 @@ fn a_recording_at_another_field_of_view_does_not_join_the_dataset() {
     record(&a, &rig);
     record(&b, &zoomed);
     let out = dir.path().join("dataset");
-    let opts = scaledp_converter::JobOptions::default().jobs(1).convert(
-        ConvertOptions::default()
-            .size(160, 120)
-            .max_invalid_fraction(0.2),
-    );
+    // These recordings carry no label: kept, as the choice has to be made.
+    let opts = scaledp_converter::JobOptions::default()
+        .jobs(1)
+        .unlabeled(scaledp_converter::Unlabeled::Keep)
+        .convert(
+            ConvertOptions::default()
+                .size(160, 120)
+                .max_invalid_fraction(0.2),
+        );
     let first = scaledp_converter::run(&[a], &out, &opts, &|_| {}).unwrap();
     assert!(
         matches!(first[0].1, scaledp_converter::InputResult::Converted(_)),

@@ -12,13 +12,12 @@ use std::collections::BTreeMap;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
+use crate::convert_common::convert_ok;
 use scaledp_recorder::net;
 use scaledp_schema::msg::CompressedVideo;
 use scaledp_schema::RosMessage;
 use scaledp_sim::SimOptions;
-use scaledp_tests::{
-    convert_ok, f32_rows, free_endpoint, scaledp_bin, small_franka, synth_episode,
-};
+use scaledp_tests::{f32_rows, free_endpoint, scaledp_bin, small_franka, synth_episode};
 
 #[test]
 fn h264_cameras_record_recover_and_decode() {
@@ -255,7 +254,7 @@ fn corrupt_h264_in_a_recording_drops_frames_to_the_next_keyframe_or_fails_only_i
     });
     let ds = dir.path().join("ds");
     let out = Command::new(scaledp_bin())
-        .args(["convert"])
+        .args(["convert", "--unlabeled", "keep"])
         .arg(&inputs)
         .arg("--out")
         .arg(&ds)

@@ -11,6 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 
+use crate::convert_common::KEEP_UNLABELED;
 use scaledp_tests::s3::{url, S3Env};
 use scaledp_tests::{run_python, scaledp_bin, small_franka, synth_episode, workspace};
 
@@ -87,6 +88,7 @@ fn slurm_and_kubernetes_shards_merge_into_one_run() {
     let out = s3
         .scaledp(&s3.endpoint)
         .args(["convert", input, "--out", &one.to_string()])
+        .args(KEEP_UNLABELED)
         .output()
         .unwrap();
     assert!(
@@ -126,6 +128,7 @@ fn slurm_and_kubernetes_shards_merge_into_one_run() {
             .env("SLURM_ARRAY_TASK_COUNT", "3")
             .env("SLURM_ARRAY_TASK_MIN", "0")
             .env("SLURM_CPUS_PER_TASK", "1")
+            .env("CONVERT_ARGS", KEEP_UNLABELED.join(" "))
             .envs(extra.iter().copied());
         c
     };
@@ -162,6 +165,7 @@ fn slurm_and_kubernetes_shards_merge_into_one_run() {
         for (k, v) in checked["env"].as_object().unwrap() {
             c.env(k, v.as_str().unwrap());
         }
+        c.env("CONVERT_ARGS", KEEP_UNLABELED.join(" "));
         let script = script.replace("/scratch", scratch.to_str().unwrap());
         c.arg("-c")
             .arg(script)

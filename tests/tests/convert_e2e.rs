@@ -7,12 +7,13 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use crate::convert_common::{convert_cli, KEEP_UNLABELED};
 use scaledp_schema::msg::{Image, JointState};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_sim::synth::write_episode;
 use scaledp_tests::{
-    check_dataset, convert_cli, f32_rows, make_bags, scaledp_bin, small_bimanual, small_franka,
-    synth_episode, write_rig_file, T0,
+    check_dataset, f32_rows, make_bags, scaledp_bin, small_bimanual, small_franka, synth_episode,
+    write_rig_file, T0,
 };
 
 #[test]
@@ -226,6 +227,7 @@ fn a_killed_conversion_leaves_a_valid_dataset_and_the_rerun_finishes_it() {
     let ds = dir.path().join("ds");
     let mut child = Command::new(scaledp_bin())
         .args(["convert", "-q", "--jobs", "1", "--file-size-mb", "1"])
+        .args(KEEP_UNLABELED)
         .arg(&inp)
         .arg("--out")
         .arg(&ds)
@@ -291,6 +293,7 @@ fn a_killed_dataset_is_valid_before_any_repair() {
         let ds = dir.path().join(format!("ds{target}"));
         let mut child = Command::new(scaledp_bin())
             .args(["convert", "-q", "--jobs", "1"])
+            .args(KEEP_UNLABELED)
             .arg(&inp)
             .arg("--out")
             .arg(&ds)

@@ -7,12 +7,12 @@
 use std::f64::consts::{PI, TAU};
 use std::path::Path;
 
+use crate::convert_common::{convert_cli, convert_ok};
 use scaledp_schema::msg::JointState;
 use scaledp_schema::rig::{CameraModel, GripperModel};
 use scaledp_schema::{Rig, RobotModel, RosMessage};
 use scaledp_tests::{
-    check_dataset, convert_cli, convert_ok, f32_column, f32_rows, make_bags, run_python,
-    small_bimanual, T0,
+    check_dataset, f32_column, f32_rows, make_bags, run_python, small_bimanual, T0,
 };
 
 /// The rig `info.json` records (its `scaledp.rig` TOML).

@@ -9,11 +9,12 @@ use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
 
+use crate::convert_common::{convert_cli, convert_ok};
 use scaledp_schema::msg::{Header, Point, Pose, PoseStamped, Quaternion, Time};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{
-    check_dataset, convert_cli, convert_ok, f32_column, f32_rows, read_json, run_python,
-    small_franka, synth_episode, workspace, T0,
+    check_dataset, f32_column, f32_rows, read_json, run_python, small_franka, synth_episode,
+    workspace, T0,
 };
 
 /// Copies the MCAP `src` to `dst`: its metadata and every message `keep(topic, index in topic)`

@@ -14,6 +14,7 @@ use std::sync::atomic::Ordering;
 
 use scaledp_store::ObjectUrl;
 
+use crate::convert_common::KEEP_UNLABELED;
 use scaledp_testkit::Proxy;
 use scaledp_tests::s3::{files, shared, url};
 use scaledp_tests::{make_bags, small_franka, synth_episode, write_rig_file};
@@ -46,6 +47,7 @@ fn convert(endpoint: &str, input: &str, out: &str, args: &[&str]) -> Output {
     shared()
         .scaledp(endpoint)
         .args(["convert", input, "--out", out])
+        .args(KEEP_UNLABELED)
         .args(jobs)
         .args(args)
         .output()
@@ -303,6 +305,7 @@ fn a_killed_job_leaves_nothing_visible_and_its_rerun_equals_one_run() {
     let mut job = s3
         .scaledp(&proxy.endpoint)
         .args(["convert", "s3://data/killed/rec/", "--out", &ds.to_string()])
+        .args(KEEP_UNLABELED)
         .args(args)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
@@ -381,6 +384,7 @@ fn storage_failures_are_one_clear_line_and_leave_nothing_half_written() {
         .scaledp(&s3.endpoint)
         .env("AWS_SECRET_ACCESS_KEY", "not-the-secret")
         .args(["convert", "s3://data/failures/rec/", "--out", local])
+        .args(KEEP_UNLABELED)
         .output()
         .unwrap();
     one_clear_line(

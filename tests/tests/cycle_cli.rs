@@ -25,7 +25,17 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
     std::fs::write(demos.join("collect.jsonl"), manifest).unwrap();
     cli_ok(
         &run_scaledp(
-            &["convert", "demos", "--out", "ds", "--size", "24x20", "-q"],
+            &[
+                "convert",
+                "demos",
+                "--out",
+                "ds",
+                "--size",
+                "24x20",
+                "--unlabeled",
+                "keep",
+                "-q",
+            ],
             root,
         ),
         "convert",

@@ -47,7 +47,7 @@ fn convert_measured(args: &[&std::ffi::OsStr]) -> Run {
     let mut child = Command::new(scaledp_bin())
         .arg("convert")
         .args(args)
-        .arg("-q")
+        .args(["--unlabeled", "keep", "-q"])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

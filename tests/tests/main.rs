@@ -6,8 +6,10 @@
 mod aloha_e2e;
 mod compressed_video;
 mod convert_cluster;
+mod convert_common;
 mod convert_e2e;
 mod convert_inputs;
+mod convert_labels;
 mod convert_outputs;
 mod convert_s3;
 mod crash_recover;

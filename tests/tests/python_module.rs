@@ -11,10 +11,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use crate::convert_common::convert_ok;
 use scaledp_datasets::{Batch, LoaderOptions, Norm, Split};
-use scaledp_tests::{
-    convert_ok, f32_rows, python, small_franka, synth_episode, workspace, write_rig_file,
-};
+use scaledp_tests::{f32_rows, python, small_franka, synth_episode, workspace, write_rig_file};
 use serde_json::{json, Value};
 
 /// Four episodes of different lengths, two 64×48 cameras.

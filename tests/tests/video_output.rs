@@ -8,9 +8,10 @@
 
 use std::path::Path;
 
+use crate::convert_common::{convert_cli, convert_ok};
 use scaledp_datasets::LoaderOptions;
 use scaledp_testkit::lerobot_video;
-use scaledp_tests::{convert_cli, convert_ok, f32_rows, small_franka, synth_episode};
+use scaledp_tests::{f32_rows, small_franka, synth_episode};
 
 const CAMERAS: [&str; 2] = ["observation.images.front", "observation.images.wrist"];
 const SIZE: (usize, usize) = (64, 48);

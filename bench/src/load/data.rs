@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use scaledp_converter::{ConvertOptions, InputResult, JobOptions};
+use scaledp_converter::{ConvertOptions, InputResult, JobOptions, Unlabeled};
 use scaledp_schema::Rig;
 
 use crate::synth::synthesize;
@@ -126,10 +126,13 @@ fn generate(cache: &Path, dir: &Path, spec: &DataSpec) -> Result<()> {
             .convert(
                 ConvertOptions::default()
                     .rig(rig.clone())
-                    .size(WIDTH, HEIGHT),
+                    .size(WIDTH, HEIGHT)
+                    // The simulator's recordings hold the training streams only.
+                    .depth(false),
             )
             .overwrite(overwrite)
             .jobs(jobs)
+            .unlabeled(Unlabeled::Keep)
     };
     let progress = bar(spec.episodes as u64, "episodes generated");
     progress.set_message(format!("into {}", dir.display()));

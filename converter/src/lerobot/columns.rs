@@ -69,6 +69,16 @@ pub fn strings<'a>(v: impl IntoIterator<Item = &'a str>) -> ArrayRef {
     Arc::new(StringArray::from_iter_values(v))
 }
 
+/// A nullable utf8 column.
+pub fn opt_strings<'a>(v: impl IntoIterator<Item = Option<&'a str>>) -> ArrayRef {
+    Arc::new(StringArray::from_iter(v))
+}
+
+/// A nullable boolean column.
+pub fn opt_bools(v: impl IntoIterator<Item = Option<bool>>) -> ArrayRef {
+    Arc::new(arrow_array::BooleanArray::from_iter(v))
+}
+
 /// `list<element: string>` with one list per row.
 pub fn string_lists(rows: &[Vec<String>]) -> ArrayRef {
     let mut b = ListBuilder::new(StringBuilder::new()).with_field(Arc::new(Field::new(

@@ -12,6 +12,7 @@ use super::depth::{CameraIntrinsics, DepthFeature};
 use super::videos::{VideoFormat, VideoSpan, VIDEO_FILE_SIZE_MB};
 use crate::align::AlignmentReport;
 use crate::error::{Error, Result};
+use crate::recorded::Recorded;
 use crate::stats::{aggregate_all, Stats, QUANTILES};
 
 /// Files per chunk directory.
@@ -53,6 +54,9 @@ pub struct EpisodeRecord {
     /// left out).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub intrinsics: BTreeMap<String, CameraIntrinsics>,
+    /// Operator, label and verdict (empty in datasets converted before they were kept).
+    #[serde(default, skip_serializing_if = "Recorded::is_empty")]
+    pub recorded: Recorded,
 }
 
 /// Everything needed to rebuild the LeRobot meta files, and to resume or merge.
@@ -420,6 +424,7 @@ fn write_episodes(root: &Path, s: &Sidecar, staged: &mut Staged) -> Result<()> {
         "scaledp/reordered_messages".into(),
         u(|e| e.report.reordered as u64),
     ));
+    recorded_columns(eps, &mut cols);
     let batch = col::batch(cols, vec![])?;
     stage_parquet(
         &root.join("meta/episodes/chunk-000/file-000.parquet"),
@@ -427,4 +432,40 @@ fn write_episodes(root: &Path, s: &Sidecar, staged: &mut Staged) -> Result<()> {
         staged,
     )
     .map(drop)
+}
+
+/// The episodes' operator, label and verdict (`scaledp/operator`, `scaledp/label`,
+/// `scaledp/verdict`, `scaledp/verdict_by`, `scaledp/verdict_accepted`,
+/// `scaledp/verdict_reason`); null where a dataset converted before they were kept has none.
+fn recorded_columns(eps: &[EpisodeRecord], cols: &mut Vec<(String, arrow_array::ArrayRef)>) {
+    fn r(e: &EpisodeRecord) -> &Recorded {
+        &e.recorded
+    }
+    fn v(e: &EpisodeRecord) -> Option<&crate::recorded::Verdict> {
+        e.recorded.verdict.as_ref()
+    }
+    cols.push((
+        "scaledp/operator".into(),
+        col::strings(eps.iter().map(|e| r(e).operator.as_str())),
+    ));
+    cols.push((
+        "scaledp/label".into(),
+        col::opt_strings(eps.iter().map(|e| r(e).label.as_deref())),
+    ));
+    cols.push((
+        "scaledp/verdict".into(),
+        col::opt_strings(eps.iter().map(|e| v(e).map(|v| v.line.as_str()))),
+    ));
+    cols.push((
+        "scaledp/verdict_by".into(),
+        col::opt_strings(eps.iter().map(|e| v(e).map(|v| v.by.as_str()))),
+    ));
+    cols.push((
+        "scaledp/verdict_accepted".into(),
+        col::opt_bools(eps.iter().map(|e| v(e).map(|v| v.accepted))),
+    ));
+    cols.push((
+        "scaledp/verdict_reason".into(),
+        col::opt_strings(eps.iter().map(|e| v(e).and_then(|v| v.reason.as_deref()))),
+    ));
 }

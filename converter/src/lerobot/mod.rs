@@ -38,6 +38,7 @@ struct Provenance {
     report: crate::align::AlignmentReport,
     time_source: String,
     intrinsics: BTreeMap<String, CameraIntrinsics>,
+    recorded: crate::recorded::Recorded,
 }
 
 /// The open data file and the episodes (row groups) it holds.
@@ -243,6 +244,7 @@ impl Dataset {
             report: ep.report.clone(),
             time_source: ep.time_source.clone(),
             intrinsics: depth::episode_intrinsics(ep),
+            recorded: ep.recorded.clone(),
         };
         let streams: Vec<EncodedVideo> =
             ep.cameras.iter().filter_map(|c| c.video.clone()).collect();
@@ -314,6 +316,7 @@ impl Dataset {
             report: rec.report.clone(),
             time_source: rec.time_source.clone(),
             intrinsics: rec.intrinsics.clone(),
+            recorded: rec.recorded.clone(),
         };
         self.commit(cols, frames, task, stats, provenance, None)
     }
@@ -408,6 +411,7 @@ impl Dataset {
             time_source: provenance.time_source,
             video: video.as_ref().map(|v| v.0.clone()),
             intrinsics: provenance.intrinsics,
+            recorded: provenance.recorded,
         };
         if video.is_some_and(|v| v.1 >= VIDEO_FILE_SIZE_MB << 20) {
             self.video_tail = None;

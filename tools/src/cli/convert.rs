@@ -15,6 +15,15 @@ pub enum VideoArg {
     H264,
 }
 
+/// What `convert --unlabeled` does with episodes recorded without a success or failure label.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum UnlabeledArg {
+    /// Convert them, stored with label `unlabeled` (never as successes).
+    Keep,
+    /// Leave them out.
+    Skip,
+}
+
 /// `scaledp convert`.
 #[derive(Debug, Args)]
 pub struct ConvertArgs {
@@ -88,6 +97,12 @@ pub struct ConvertArgs {
     /// Convert episodes recorded with outcome `failure` too.
     #[arg(long)]
     pub include_failures: bool,
+    /// What to do with episodes recorded without a success or failure label (a plain stop, a
+    /// timed or unattended recording, a bag from elsewhere): keep (stored with label
+    /// `unlabeled` in meta/episodes/) or skip. No default: when any input is unlabelled and
+    /// this is not given, convert names them and converts nothing.
+    #[arg(long, value_enum, value_name = "keep|skip")]
+    pub unlabeled: Option<UnlabeledArg>,
     /// Split an input into episodes wherever nothing was logged for this many seconds (long
     /// bags holding many demonstrations).
     #[arg(long, value_name = "SECONDS")]

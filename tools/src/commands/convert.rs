@@ -7,11 +7,12 @@ use std::time::Instant;
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use scaledp_converter::{
-    ConvertOptions, InputResult, JobOptions, Location, MergeOptions, Progress, VideoCodec,
+    ConvertOptions, InputResult, JobOptions, Location, MergeOptions, Progress, Unlabeled,
+    VideoCodec,
 };
 use scaledp_schema::Rig;
 
-use crate::cli::{ConvertArgs, ExitStatus, MergeArgs, VideoArg};
+use crate::cli::{ConvertArgs, ExitStatus, MergeArgs, UnlabeledArg, VideoArg};
 use crate::shared::location;
 
 pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
@@ -58,7 +59,12 @@ pub fn run(args: ConvertArgs) -> Result<ExitStatus> {
         .convert(convert)
         .overwrite(args.overwrite)
         .file_size_mib(args.file_size_mib)
-        .include_failures(args.include_failures);
+        .include_failures(args.include_failures)
+        .unlabeled(match args.unlabeled {
+            None => Unlabeled::Refuse,
+            Some(UnlabeledArg::Keep) => Unlabeled::Keep,
+            Some(UnlabeledArg::Skip) => Unlabeled::Skip,
+        });
     if let Some(jobs) = args.jobs {
         opts = opts.jobs(jobs);
     }
@@ -113,12 +119,13 @@ fn summarize(
                     frames += rec.length;
                     let dropped: u64 = rec.report.streams.iter().map(|s| s.dropped).sum();
                     println!(
-                    "episode {:>4}  {:>5} frames  skew {:>5.1} ms  invalid {:>3}  dropped {:>3}  {}",
+                    "episode {:>4}  {:>5} frames  skew {:>5.1} ms  invalid {:>3}  dropped {:>3}  {:<9}  {}",
                     rec.episode_index,
                     rec.length,
                     rec.report.max_camera_skew_s * 1e3,
                     rec.report.invalid,
                     dropped,
+                    rec.recorded.label.as_deref().unwrap_or("-"),
                     rec.source
                 );
                 }

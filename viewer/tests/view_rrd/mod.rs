@@ -112,7 +112,10 @@ fn no_leftovers(out: &Path) {
 /// Converts `inputs` into a dataset at `out` with the converter library.
 fn convert_dataset(inputs: &[PathBuf], out: &Path) {
     let opts = scaledp_converter::JobOptions::default()
-        .convert(ConvertOptions::default().size(64, 48))
+        // Synthetic episodes: no labels, and no depth (the simulator writes the training
+        // streams only).
+        .convert(ConvertOptions::default().size(64, 48).depth(false))
+        .unlabeled(scaledp_converter::Unlabeled::Keep)
         .jobs(1);
     let results = scaledp_converter::run(inputs, out, &opts, &|_| {}).unwrap();
     assert!(

@@ -77,7 +77,7 @@ fn a_recording_shows_every_frame_every_joint_state_and_the_converted_episode() {
         .all(|(_, w)| w.len() == 1 && (0.0..=0.08).contains(&w[0])));
 
     // State and action per tick: what the converter computes for this recording.
-    let opts = ConvertOptions::default().size(64, 48);
+    let opts = ConvertOptions::default().size(64, 48).depth(false);
     let ep = convert(&mcap, &src, &InMemory(&src), &opts).unwrap();
     assert_eq!(summary.shown[0].frames, ep.len());
     for (d, dim) in ["x", "y", "z", "roll", "pitch", "yaw", "gripper"]
