@@ -29,7 +29,11 @@ def main(ds, ex):
     for name, f in feats.items():
         if set(f) != {"dtype", "shape", "names"}:
             errors.append(f"feature {name} has keys {sorted(f)}")
-        if f["dtype"] in ("float32",) and f["names"] is not None and len(f["names"]) != f["shape"][0]:
+        # A vector names its elements; a feature of more axes (images, depth) names its axes.
+        if len(f["shape"]) > 1:
+            if f["names"] is not None and len(f["names"]) != len(f["shape"]):
+                errors.append(f"feature {name}: {len(f['names'])} names for shape {f['shape']}")
+        elif f["dtype"] in ("float32",) and f["names"] is not None and len(f["names"]) != f["shape"][0]:
             errors.append(f"feature {name}: {len(f['names'])} names for shape {f['shape']}")
 
     # Data files: every column typed as LeRobot types it.

@@ -14,6 +14,7 @@ mod convert_outputs;
 mod convert_s3;
 mod crash_recover;
 mod cycle_cli;
+mod depth;
 mod fk_reference;
 mod hostile_convert;
 mod hostile_record;
