@@ -9,12 +9,12 @@ use std::path::Path;
 use scaledp_schema::rig::Rig;
 use scaledp_schema::ActionSpace;
 
-use crate::align::Stream;
 use crate::error::{Error, Result};
 use crate::kinematics::ArmKinematics;
 use crate::options::ConvertOptions;
 use crate::series::{messages_of, CommandPoses, JointSeries};
 use crate::source::{RawMessage, Recording};
+use scaledp_align::Stream;
 
 /// Arms with a command topic take the action's pose from the latest command at each tick
 /// (instead of the next tick's state), its angles put on the state's branch; grippers with a

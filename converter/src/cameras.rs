@@ -10,7 +10,6 @@ use rayon::prelude::*;
 use scaledp_codec::{EncodedVideo, VideoEncoder, VideoSettings};
 use scaledp_schema::rig::{Camera, DepthEncoding, Rig};
 
-use crate::align::{Alignment, Stream};
 use crate::camera_info::{intrinsics_of, Intrinsics};
 use crate::depth::DepthStats;
 use crate::error::{Error, Result};
@@ -20,6 +19,7 @@ use crate::options::ConvertOptions;
 use crate::series::{messages_of, stamp_of, Ordered};
 use crate::source::Recording;
 use crate::stats::Stats;
+use scaledp_align::{Alignment, Stream};
 
 /// One camera's frames of an episode.
 #[derive(Debug, Clone)]

@@ -6,9 +6,9 @@ use std::path::Path;
 use scaledp_schema::rig::{Arm, Camera, CameraModel, Gripper, GripperModel, Rig};
 use scaledp_schema::{EpisodeMetadata, RobotModel};
 
-use crate::align::median_interval_s;
 use crate::error::{Error, Result};
 use crate::source::Recording;
+use scaledp_align::median_interval_s;
 
 /// The episode metadata our recorder (or the simulator) stored, if any.
 pub fn episode_metadata(path: &Path, rec: &Recording) -> Result<Option<EpisodeMetadata>> {

@@ -11,7 +11,6 @@ use scaledp_schema::ActionSpace;
 pub use scaledp_schema::action::state_names;
 
 use crate::actions::command_actions;
-use crate::align::{align, Alignment, AlignmentReport, Stream};
 use crate::cameras::{camera_frames, camera_streams, Chosen};
 pub use crate::cameras::{CameraFrames, DepthFrames};
 use crate::error::{Error, Result};
@@ -21,6 +20,7 @@ pub use crate::options::ConvertOptions;
 pub use crate::recorded::Recorded;
 use crate::series::{messages_of, unwrap_pose_angles, JointSeries};
 use crate::source::Recording;
+use scaledp_align::{align, Alignment, AlignmentReport, Stream};
 
 /// A converted episode, ready to be written.
 #[derive(Debug, Clone)]

@@ -16,7 +16,9 @@ use crate::resample::{lanczos3, reorder, with_resizer};
 use crate::source::{RawMessage, Serialization};
 
 mod histogram;
+mod rgb;
 pub use histogram::ChannelHistogram;
+pub use rgb::Rgb;
 
 /// Why a camera frame could not become RGB or JPEG.
 #[derive(Debug, thiserror::Error)]
@@ -372,17 +374,6 @@ pub fn encode_message(
     };
     let small = resize(&rgb, spec.width, spec.height).map_err(err)?;
     finish(small, spec, source).map_err(err)
-}
-
-/// Tightly packed RGB8 pixels.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Rgb {
-    /// Columns.
-    pub width: u32,
-    /// Rows.
-    pub height: u32,
-    /// `width × height × 3` bytes.
-    pub data: Vec<u8>,
 }
 
 /// Decodes a frame to RGB, honouring `step` (row padding) for raw images.

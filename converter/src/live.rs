@@ -43,8 +43,8 @@ pub fn frame_at(
     t_ns: u64,
     stale_periods: f64,
 ) -> Option<(usize, bool)> {
-    crate::align::latest_at(stamps_ns, t_ns)?;
-    Some(crate::align::frame_at(
+    scaledp_align::latest_at(stamps_ns, t_ns)?;
+    Some(scaledp_align::frame_at(
         stamps_ns,
         period_s,
         t_ns,
@@ -55,7 +55,7 @@ pub fn frame_at(
 /// The converter's joint rule at tick `t_ns`: positions (`positions[i]` stamped `stamps_ns[i]`,
 /// ascending; `period_s` the stream's nominal period, 1 / its rig `rate_hz`) linearly
 /// interpolated between the samples around the tick. `None` without a sample at or after the
-/// tick, or across a hole wider than [`max_hole_s`](crate::align::max_hole_s) (ten periods,
+/// tick, or across a hole wider than [`max_hole_s`](scaledp_align::max_hole_s) (ten periods,
 /// 50 ms or one tick of `tick_s`, whichever is widest).
 pub fn joints_at(
     stamps_ns: &[u64],
@@ -64,8 +64,8 @@ pub fn joints_at(
     tick_s: f64,
     t_ns: u64,
 ) -> Option<Vec<f64>> {
-    crate::align::bracket(stamps_ns, t_ns)?;
-    let ((i, j, w), sound) = crate::align::sample_at(stamps_ns, period_s, t_ns, tick_s);
+    scaledp_align::bracket(stamps_ns, t_ns)?;
+    let ((i, j, w), sound) = scaledp_align::sample_at(stamps_ns, period_s, t_ns, tick_s);
     let (a, b) = (positions.get(i)?, positions.get(j)?);
     sound.then(|| crate::kinematics::lerp(a, b, w))
 }
@@ -210,7 +210,7 @@ mod tests {
         // stamps), from the first one the episode kept (invalid ticks at the start are trimmed).
         let step = 1e9 / rig.control_rate_hz;
         let start = frame_stamps[0].max(arm_stamps[0]).max(grip_stamps[0]);
-        let origin = crate::align::first_tick(start, Some(frame_stamps[0]), 1.0 / cam.fps, step);
+        let origin = scaledp_align::first_tick(start, Some(frame_stamps[0]), 1.0 / cam.fps, step);
         let tick = |k: usize| origin + (k as f64 * step).round() as u64;
         let first_joints = &ep.joints[..arm.joint_names.len()];
         let trimmed = (0..10)

@@ -2,7 +2,7 @@
 //! streams past, so that they are decoded, resized and encoded during the one read instead of on
 //! a second read (decompressing every camera byte again).
 //!
-//! Alignment (see [`crate::align`]) puts ticks at `first + round(k × period)`, `first` following
+//! Alignment (see [`scaledp_align`]) puts ticks at `first + round(k × period)`, `first` following
 //! from the first stamps of the rig's cameras, arms and grippers ([`first_tick`]), and gives each
 //! tick each camera's latest frame at or before it. So once every stream has started, frame `i`
 //! of a camera is picked only if a tick falls in `[stamp i, stamp i+1)`, which is known when frame
@@ -14,11 +14,11 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use crate::align::first_tick;
 use crate::encode_pool::FrameJob;
 use crate::mcap_stream::{FrameBytes, Metadata, Payload};
 use crate::options::ConvertOptions;
 use crate::source::{Recording, TopicInfo};
+use scaledp_align::first_tick;
 
 /// Frames held per camera while `start` is unknown (a stream that never starts).
 const MAX_HELD: usize = 16;
@@ -253,7 +253,7 @@ fn job(topic: &str, c: Candidate) -> FrameJob {
 }
 
 /// Whether a tick `start + round(k × period)`, k ≥ 0, falls in `[stamp, next)` (as
-/// [`crate::align::align`] computes ticks).
+/// [`scaledp_align::align`] computes ticks).
 fn plan_picks(period_ns: f64, start: Option<u64>, stamp: u64, next: u64) -> bool {
     let Some(start) = start else {
         return true;

@@ -7,12 +7,12 @@ use std::path::Path;
 use scaledp_schema::kinematics::{rpy_from_rotation, unwrap_angles};
 use scaledp_schema::rig::Arm;
 
-use crate::align::Stream;
 use crate::decode;
 use crate::error::{Error, Result};
 use crate::kinematics::ArmKinematics;
 use crate::options::ConvertOptions;
 use crate::source::{RawMessage, Recording};
+use scaledp_align::Stream;
 
 /// The capture time of a message: its header stamp, or its log time with `--log-time` or when
 /// the header holds none.

@@ -19,7 +19,7 @@
 
 use scaledp_schema::rig::DepthEncoding;
 
-use super::{DepthImage, DepthPixels, MAX_PIXELS};
+use super::image::{DepthImage, DepthPixels, MAX_PIXELS};
 
 /// Bytes of the `ConfigHeader` before the image.
 const HEADER_BYTES: usize = 12;

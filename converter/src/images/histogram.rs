@@ -1,7 +1,7 @@
 //! Per-channel pixel statistics of an episode's resized frames (LeRobot's image stats), kept as
 //! exact histograms so that min, max, mean, std and quantiles aggregate over episodes exactly.
 
-use super::Rgb;
+use super::rgb::Rgb;
 
 /// Per-channel histogram of an episode's frames: exact min, max, mean, std and quantiles.
 #[derive(Debug, Clone)]

@@ -13,12 +13,57 @@ use arrow_array::{
 };
 use arrow_buffer::OffsetBuffer;
 use arrow_schema::{DataType, Field, Fields, Schema};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ArrowWriter;
 use parquet::basic::Compression;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
 
 use crate::error::{Error, Result};
+
+/// Files per chunk directory.
+pub const CHUNKS_SIZE: u64 = 1000;
+
+/// An [`Error::Dataset`] about `path`.
+pub fn derr(path: &Path, e: impl std::fmt::Display) -> Error {
+    Error::Dataset {
+        path: path.into(),
+        reason: e.to_string(),
+    }
+}
+
+/// Reads row group `group` of a data file.
+pub fn read_row_group(path: &Path, group: usize) -> Result<RecordBatch> {
+    let file = File::open(path).map_err(Error::io(path))?;
+    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
+        .map_err(|e| derr(path, e))?
+        .with_row_groups(vec![group])
+        .with_batch_size(1 << 20)
+        .build()
+        .map_err(|e| derr(path, e))?;
+    let batches: Vec<RecordBatch> = reader
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| derr(path, e))?;
+    let schema = batches
+        .first()
+        .map(RecordBatch::schema)
+        .ok_or_else(|| derr(path, format!("row group {group} is empty")))?;
+    arrow_select_concat(&schema, &batches).map_err(|e| derr(path, e))
+}
+
+fn arrow_select_concat(
+    schema: &arrow_schema::SchemaRef,
+    batches: &[RecordBatch],
+) -> std::result::Result<RecordBatch, String> {
+    if batches.len() == 1 {
+        return Ok(batches[0].clone());
+    }
+    Err(format!(
+        "row group read as {} batches for {} columns; expected one",
+        batches.len(),
+        schema.fields().len()
+    ))
+}
 
 /// `fixed_size_list<element: float>[dim]` from row-major values.
 pub fn fixed_f32(values: &[f32], dim: usize) -> ArrayRef {

@@ -10,13 +10,12 @@ use serde::{Deserialize, Serialize};
 use super::columns::{self as col, stage, stage_parquet, Staged};
 use super::depth::{CameraIntrinsics, DepthFeature};
 use super::videos::{VideoFormat, VideoSpan, VIDEO_FILE_SIZE_MB};
-use crate::align::AlignmentReport;
 use crate::error::{Error, Result};
 use crate::recorded::Recorded;
 use crate::stats::{aggregate_all, Stats, QUANTILES};
+use scaledp_align::AlignmentReport;
 
-/// Files per chunk directory.
-pub const CHUNKS_SIZE: u64 = 1000;
+pub use super::columns::CHUNKS_SIZE;
 
 /// One committed episode.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

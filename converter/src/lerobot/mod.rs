@@ -20,9 +20,9 @@ use std::path::{Path, PathBuf};
 use arrow_array::{ArrayRef, RecordBatch};
 use scaledp_codec::EncodedVideo;
 
+use columns::{derr, read_row_group};
 pub use depth::{CameraIntrinsics, DepthFeature};
 pub use meta::{data_path, EpisodeRecord, Sidecar};
-use repair::read_row_group;
 use videos::VideoTail;
 pub use videos::{VideoFormat, VideoSpan, VIDEO_FILE_SIZE_MB};
 
@@ -35,7 +35,7 @@ struct Provenance {
     source: String,
     source_hash: String,
     source_etag: Option<String>,
-    report: crate::align::AlignmentReport,
+    report: scaledp_align::AlignmentReport,
     time_source: String,
     intrinsics: BTreeMap<String, CameraIntrinsics>,
     recorded: crate::recorded::Recorded,
@@ -55,13 +55,6 @@ pub struct Dataset {
     /// The video file still open (datasets whose cameras are video features).
     video_tail: Option<VideoTail>,
     file_size_mb: u64,
-}
-
-fn derr(path: &Path, e: impl std::fmt::Display) -> Error {
-    Error::Dataset {
-        path: path.into(),
-        reason: e.to_string(),
-    }
 }
 
 impl Dataset {

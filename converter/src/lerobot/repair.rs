@@ -9,43 +9,11 @@ use std::path::Path;
 use arrow_array::RecordBatch;
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 
+use super::columns::{self, derr, read_row_group};
 use super::meta::{self, data_path};
 use super::videos::video_path;
-use super::{columns, derr, Dataset};
+use super::Dataset;
 use crate::error::{Error, Result};
-
-/// Reads row group `group` of a data file.
-pub(super) fn read_row_group(path: &Path, group: usize) -> Result<RecordBatch> {
-    let file = File::open(path).map_err(Error::io(path))?;
-    let reader = ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| derr(path, e))?
-        .with_row_groups(vec![group])
-        .with_batch_size(1 << 20)
-        .build()
-        .map_err(|e| derr(path, e))?;
-    let batches: Vec<RecordBatch> = reader
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|e| derr(path, e))?;
-    let schema = batches
-        .first()
-        .map(RecordBatch::schema)
-        .ok_or_else(|| derr(path, format!("row group {group} is empty")))?;
-    arrow_select_concat(&schema, &batches).map_err(|e| derr(path, e))
-}
-
-fn arrow_select_concat(
-    schema: &arrow_schema::SchemaRef,
-    batches: &[RecordBatch],
-) -> std::result::Result<RecordBatch, String> {
-    if batches.len() == 1 {
-        return Ok(batches[0].clone());
-    }
-    Err(format!(
-        "row group read as {} batches for {} columns; expected one",
-        batches.len(),
-        schema.fields().len()
-    ))
-}
 
 fn num_rows(path: &Path) -> Result<(u64, usize)> {
     let file = File::open(path).map_err(Error::io(path))?;

@@ -11,9 +11,7 @@ use std::path::{Path, PathBuf};
 use scaledp_codec::{mp4_file, Codec, EncodedVideo, VideoSettings};
 use serde::{Deserialize, Serialize};
 
-use super::columns::{stage, Staged};
-use super::derr;
-use super::meta::CHUNKS_SIZE;
+use super::columns::{derr, stage, Staged, CHUNKS_SIZE};
 use crate::error::Result;
 
 /// LeRobot's default size target of a video file (`video_files_size_in_mb`).

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use mcap::records::op;
 
-use super::{record_at, Buffers, Metadata, OnMessage, Reader};
+use super::reader::{record_at, Buffers, Metadata, OnMessage, Reader};
 use crate::error::{Error, Result};
 use crate::source::TopicInfo;
 

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
-use super::{Buffers, Metadata, OnMessage, Reader, MAX_CHUNK};
+use super::reader::{Buffers, Metadata, OnMessage, Reader, MAX_CHUNK};
 use crate::error::{Error, Result};
 use crate::source::TopicInfo;
 

@@ -1,7 +1,10 @@
 //! Tests of [`super`]: round trips and hostile files.
 
 #![allow(clippy::unwrap_used)]
+use super::reader::*;
 use super::*;
+use mcap::records::op;
+use std::collections::BTreeMap;
 
 /// (topic, log time, payload) of the messages written: every third a small one, the others
 /// large "frames", so that most 3 MiB chunks end with a frame.
