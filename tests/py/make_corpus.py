@@ -280,7 +280,7 @@ def content_cases(good):
     def encoding(msgs):
         for m in of(msgs, FRONT):
             m["encoding"], m["step"] = "16UC1", W * 2
-    case("c_unsupported_encoding.mcap", "unsupported image encoding '16UC1'", encoding)
+    case("c_unsupported_encoding.mcap", "a 16UC1 depth image where colour frames are expected", encoding)
 
     def bomb(msgs):
         data = png_bomb(60_000, 60_000)

@@ -18,7 +18,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
     std::fs::create_dir_all(&demos).unwrap();
     let mut manifest = String::new();
     // A collection that (wrongly) used a test seed: eval must notice it through the dataset.
-    for (i, seed) in [0u64, 1, 2_000_001].into_iter().enumerate() {
+    for (i, seed) in [0u64, 1, 3_000_001].into_iter().enumerate() {
         synth_episode(&demos.join(format!("episode_{i:06}.mcap")), &rig, seed, 4.0);
         manifest.push_str(&format!("{{\"seed\": {seed}}}\n"));
     }
@@ -102,7 +102,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
         "every checkpoint, the untrained one included, on the validation seeds"
     );
     assert_eq!(ti["steps"], 2);
-    assert_eq!(ti["test_seeds"], serde_json::json!([2_000_000, 2_000_001]));
+    assert_eq!(ti["test_seeds"], serde_json::json!([3_000_000, 3_000_001]));
     for k in [
         "test_success_rate",
         "wilson_low",
@@ -152,7 +152,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
     assert_eq!(before["test"], after["test"]);
     assert!(t0.elapsed().as_secs_f64() < 60.0);
 
-    // eval: the test split holds seed 2 000 001, which the demonstrations used.
+    // eval: the test split holds seed 3 000 001, which the demonstrations used.
     let refused = run_scaledp(
         &["eval", "runs/toy/ti", "--split", "test", "--episodes", "3"],
         root,
@@ -160,7 +160,7 @@ fn a_toy_experiment_runs_end_to_end_resumes_and_eval_refuses_training_seeds() {
     assert!(!refused.status.success());
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(
-        err.contains("seed 2000001") && err.contains("collect.jsonl"),
+        err.contains("seed 3000001") && err.contains("collect.jsonl"),
         "{err}"
     );
     let val = [
