@@ -7,7 +7,9 @@ use clap::{Args, Subcommand, ValueEnum};
 /// `scaledp bench`.
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
-    /// Publish the reference load over loopback into a recorder process and report drops and CPU.
+    /// Soak the recorder: the reference load (2 ZED 1080p with depth, 3 RealSense with depth and
+    /// camera_info, 2 arms at 500 Hz, /tf) over loopback into a recorder process, episodes back
+    /// to back for --minutes; messages lost per topic, resident memory, CPU, MB/s written.
     Record(BenchRecordArgs),
     /// Convert a fixed generated set of recordings and report frames/s, MB/s and peak memory,
     /// against the usual single-process Python route.
@@ -45,15 +47,54 @@ impl Compression {
 /// `scaledp bench record`.
 #[derive(Debug, Args)]
 pub struct BenchRecordArgs {
-    /// Seconds of load.
-    #[arg(long, default_value_t = 10.0)]
-    pub seconds: f64,
+    /// Minutes of load: episodes of --episode-seconds back to back (the last one shorter when
+    /// they do not divide).
+    #[arg(long, default_value_t = 60.0)]
+    pub minutes: f64,
+    /// Seconds of load per episode.
+    #[arg(long, default_value_t = 60.0)]
+    pub episode_seconds: f64,
+    /// Fraction of the reference load's bytes offered: every image's pixel count times this
+    /// (width and height by its square root), rates unchanged.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_fraction)]
+    pub load: f64,
     /// Chunk compression of the recorder.
     #[arg(long, value_enum, default_value = "lz4")]
     pub compression: Compression,
-    /// Where the recording goes (default: a temporary directory, removed afterwards).
+    /// Where the episodes and the report go (default: target/bench-record in the workspace
+    /// holding the current directory, else a directory in the system temp dir).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Keep the finished episodes (default: each is deleted once checked; an hour of the
+    /// reference load does not fit on a disk).
+    #[arg(long)]
+    pub keep: bool,
+    /// The JSON report (default: report.json in the output directory).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// End an episode early, and start no more, when the output disk has less free (GB).
+    #[arg(long, default_value_t = 20.0)]
+    pub min_free_gb: f64,
+    /// Seconds between samples of the recorder's resident memory.
+    #[arg(long, default_value_t = 10.0)]
+    pub sample_seconds: f64,
+    /// Internal: run the recorder in this process, driven over stdin, reporting on stdout;
+    /// the benchmark measures it as a child process.
+    #[arg(long, hide = true, requires = "endpoint")]
+    pub worker: bool,
+    /// Internal: the Zenoh endpoint a --worker connects to.
+    #[arg(long, hide = true)]
+    pub endpoint: Option<String>,
+}
+
+/// A fraction in (0, 1].
+fn parse_fraction(s: &str) -> Result<f64, String> {
+    let f: f64 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if f > 0.0 && f <= 1.0 {
+        Ok(f)
+    } else {
+        Err(format!("{s}: need a fraction in (0, 1]"))
+    }
 }
 
 /// `scaledp bench convert`.

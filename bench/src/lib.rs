@@ -2,8 +2,10 @@
 //! `run(args) -> Result<Outcome>` that prints its figures on stdout (progress and child output
 //! go to stderr).
 //!
-//! - [`BenchCommand::Record`]: the reference load published over loopback into a
-//!   `scaledp record` child process; published vs recorded counts, drops, MB/s, recorder CPU.
+//! - [`BenchCommand::Record`]: a soak of the recorder, a child process recording the
+//!   reference load (2 ZED 1080p with depth, 3 RealSense with depth, 2 arms at 500 Hz, /tf,
+//!   about 1.1 GB/s, or a fraction of it) over loopback in episodes back to back; messages
+//!   sent vs recorded per topic, resident memory over time, CPU share, MB/s written.
 //! - [`BenchCommand::Convert`]: generated recordings converted by a `scaledp convert` child;
 //!   frames/s, MB/s, peak memory, beside the usual single-process Python route, the same
 //!   conversion bucket to bucket on a loopback S3 endpoint, and the converter's floor.
@@ -17,8 +19,8 @@
 //! A new benchmark is one more module and one more [`BenchCommand`] variant.
 //!
 //! **The `scaledp` executable.** Each benchmark measures the product as a child process, so its
-//! time and memory are its own: it runs [`std::env::current_exe`] with `record`, `convert` or
-//! `bench load --worker`. Call [`run`] from the `scaledp` binary (or one with the same
+//! time and memory are its own: it runs [`std::env::current_exe`] with `bench record --worker`,
+//! `convert` or `bench load --worker`. Call [`run`] from the `scaledp` binary (or one with the same
 //! subcommands).
 //!
 //! **Python.** The scripts of the Python routes are compiled in and written to a temporary

@@ -4,6 +4,7 @@
 //! reads alone; `cargo test -p scaledp-tests --test e2e -- record_e2e::` runs one.
 
 mod aloha_e2e;
+mod bench_record;
 mod compressed_video;
 mod convert_cluster;
 mod convert_common;
