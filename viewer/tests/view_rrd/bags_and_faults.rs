@@ -200,11 +200,21 @@ fn live_views_write_what_they_are_given() {
     let mcap = dir.path().join("episode_000000.mcap");
     synth(&mcap, &rig, 0, 0.5);
     let src = scaledp_converter::read_input(&mcap).unwrap();
+    // The synthetic episode holds the training streams only: the rig's depth, camera_info and
+    // /tf topics have no message in it and stay unfed.
+    let mut fed = Vec::new();
     for (i, t) in live.topics().to_vec().iter().enumerate() {
-        let m = src.messages.iter().find(|m| m.topic == t.topic).unwrap();
+        let Some(m) = src.messages.iter().find(|m| m.topic == t.topic) else {
+            continue;
+        };
         live.message(i, &m.data);
         live.message(i, &m.data); // within the rate limit: skipped
+        fed.push(t.topic.clone());
     }
+    assert!(
+        fed.iter().any(|t| t == "/franka/joint_states") && fed.len() >= 4,
+        "{fed:?}"
+    );
     let figures = |n: u64| {
         live.topics()
             .iter()
