@@ -21,7 +21,9 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use scaledp_tests::{convert_ok, synth_episode, workspace, write_rig_file};
+use scaledp_tests::{synth_episode, workspace, write_rig_file};
+
+use crate::convert_common::convert_ok;
 
 /// The Python with torch ([`scaledp_testkit::BENCH_VENV`]).
 pub fn python() -> PathBuf {
