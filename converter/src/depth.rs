@@ -91,23 +91,14 @@ impl<'a> RawDepth<'a> {
                 MAX_PIXELS >> 20
             )));
         }
-        let bpp = encoding.bytes_per_pixel();
-        let row = w * bpp;
-        if step < row {
-            return Err(bad(format!(
-                "step {step} is smaller than width {w} × {bpp} bytes"
-            )));
-        }
-        let needed = step
-            .checked_mul(h - 1)
-            .and_then(|b| b.checked_add(row))
-            .ok_or_else(|| bad(format!("absurd size (step {step})")))?;
-        if self.data.len() < needed {
-            return Err(bad(format!(
-                "{} data bytes, but {h} rows of step {step} need {needed}",
-                self.data.len()
-            )));
-        }
+        let row = crate::raw_rows::checked_row_bytes(
+            w,
+            h,
+            step,
+            encoding.bytes_per_pixel(),
+            self.data.len(),
+        )
+        .map_err(bad)?;
         let big = self.is_bigendian != 0;
         let rows = self.data.chunks(step).take(h).map(|r| &r[..row]);
         let pixels = match encoding {

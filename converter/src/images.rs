@@ -183,24 +183,7 @@ impl<'a> ImageView<'a> {
             height: self.height,
             problem,
         };
-        let row = w
-            .checked_mul(channels)
-            .ok_or_else(|| bad("absurd width".into()))?;
-        if step < row {
-            return Err(bad(format!(
-                "step {step} is smaller than width {w} × {channels} bytes"
-            )));
-        }
-        let needed = step
-            .checked_mul(h - 1)
-            .and_then(|b| b.checked_add(row))
-            .ok_or_else(|| bad(format!("absurd size (step {step})")))?;
-        if self.data.len() < needed {
-            return Err(bad(format!(
-                "{} data bytes, but {h} rows of step {step} need {needed}",
-                self.data.len()
-            )));
-        }
+        crate::raw_rows::checked_row_bytes(w, h, step, channels, self.data.len()).map_err(bad)?;
         Ok((channels, order))
     }
 }

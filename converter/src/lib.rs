@@ -62,6 +62,7 @@ mod objects;
 mod options;
 mod per_input;
 mod prefetch;
+mod raw_rows;
 mod recorded;
 mod resample;
 pub mod ros1;
