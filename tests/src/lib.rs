@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+pub mod child;
 pub mod house;
 pub mod s3;
 
@@ -281,4 +282,39 @@ pub fn live_episode(cwd: &Path, run: &str, seconds: &str) -> serde_json::Value {
     let r = read_json(&report);
     assert_eq!(r["mode"], "live", "{out}\n{r}");
     r
+}
+
+/// A column of a dataset's episodes table (`meta/episodes/chunk-000/file-000.parquet`), as JSON
+/// values: strings, booleans, float64 and int64; a null is `Null`.
+pub fn episode_column(ds: &Path, column: &str) -> Vec<serde_json::Value> {
+    use arrow_array::cast::AsArray;
+    use arrow_array::types::{Float64Type, Int64Type};
+    use arrow_array::Array;
+    use arrow_schema::DataType;
+    let path = ds.join("meta/episodes/chunk-000/file-000.parquet");
+    let file = std::fs::File::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
+        .and_then(|b| b.build())
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut out = Vec::new();
+    for batch in reader {
+        let batch = batch.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let a = batch
+            .column_by_name(column)
+            .unwrap_or_else(|| panic!("no episode column {column}"));
+        let value = |i: usize| -> serde_json::Value {
+            if a.is_null(i) {
+                return serde_json::Value::Null;
+            }
+            match a.data_type() {
+                DataType::Utf8 => a.as_string::<i32>().value(i).into(),
+                DataType::Boolean => a.as_boolean().value(i).into(),
+                DataType::Float64 => a.as_primitive::<Float64Type>().value(i).into(),
+                DataType::Int64 => a.as_primitive::<Int64Type>().value(i).into(),
+                t => panic!("episode column {column}: {t}"),
+            }
+        };
+        out.extend((0..a.len()).map(value));
+    }
+    out
 }

@@ -11,10 +11,9 @@ use std::collections::BTreeMap;
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
-use arrow_array::{Array, BooleanArray, StringArray};
 use scaledp_schema::episode::END_RECORD;
 use scaledp_schema::{EpisodeMetadata, Label};
-use scaledp_tests::{convert_cli, small_franka, synth_episode, write_rig_file};
+use scaledp_tests::{convert_cli, episode_column, small_franka, synth_episode, write_rig_file};
 
 /// The recorder's verdict record (what `scaledp record` stores when an episode ends).
 const VERDICT_RECORD: &str = "scaledp.verdict";
@@ -67,27 +66,16 @@ fn relabel(
     w.finish().unwrap();
 }
 
-/// A string column of `meta/episodes` (None for a null).
+/// A string or boolean column of `meta/episodes` as text (None for a null).
 fn strings(ds: &Path, column: &str) -> Vec<Option<String>> {
-    let file = std::fs::File::open(ds.join("meta/episodes/chunk-000/file-000.parquet")).unwrap();
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut out = Vec::new();
-    for batch in reader {
-        let batch = batch.unwrap();
-        let col = batch
-            .column_by_name(column)
-            .unwrap_or_else(|| panic!("no column {column}"));
-        if let Some(b) = col.as_any().downcast_ref::<BooleanArray>() {
-            out.extend((0..b.len()).map(|i| b.is_valid(i).then(|| b.value(i).to_string())));
-        } else {
-            let s = col.as_any().downcast_ref::<StringArray>().unwrap();
-            out.extend((0..s.len()).map(|i| s.is_valid(i).then(|| s.value(i).to_string())));
-        }
-    }
-    out
+    episode_column(ds, column)
+        .into_iter()
+        .map(|v| match v {
+            serde_json::Value::Null => None,
+            serde_json::Value::String(s) => Some(s),
+            other => Some(other.to_string()),
+        })
+        .collect()
 }
 
 fn run(inputs: &[PathBuf], ds: &Path, rig: &Path, extra: &[&str]) -> std::process::Output {

@@ -13,8 +13,8 @@ use crate::convert_common::{convert_cli, convert_ok};
 use scaledp_schema::msg::{Header, Point, Pose, PoseStamped, Quaternion, Time};
 use scaledp_schema::{Rig, RosMessage};
 use scaledp_tests::{
-    check_dataset, f32_column, f32_rows, read_json, run_python, small_franka, synth_episode,
-    workspace, T0,
+    check_dataset, episode_column, f32_column, f32_rows, read_json, run_python, small_franka,
+    synth_episode, workspace, T0,
 };
 
 /// Copies the MCAP `src` to `dst`: its metadata and every message `keep(topic, index in topic)`
@@ -241,47 +241,6 @@ fn a_pose_stamped_command_topic_is_the_action_at_each_tick() {
         chosen.windows(2).all(|w| (4..=6).contains(&(w[1] - w[0]))),
         "{chosen:?}"
     );
-}
-
-/// A string, float64 or int64 column of the episodes table, as JSON values.
-fn episode_column(ds: &Path, column: &str) -> Vec<serde_json::Value> {
-    use arrow_array::cast::AsArray;
-    use arrow_array::types::{Float64Type, Int64Type};
-    let file = std::fs::File::open(ds.join("meta/episodes/chunk-000/file-000.parquet")).unwrap();
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .unwrap()
-        .build()
-        .unwrap();
-    let mut out = Vec::new();
-    for batch in reader {
-        let batch = batch.unwrap();
-        let a = batch
-            .column_by_name(column)
-            .unwrap_or_else(|| panic!("no episode column {column}"));
-        match a.data_type() {
-            arrow_schema::DataType::Utf8 => {
-                out.extend(a.as_string::<i32>().iter().map(|v| v.unwrap().into()));
-            }
-            arrow_schema::DataType::Float64 => {
-                out.extend(
-                    a.as_primitive::<Float64Type>()
-                        .values()
-                        .iter()
-                        .map(|&v| v.into()),
-                );
-            }
-            arrow_schema::DataType::Int64 => {
-                out.extend(
-                    a.as_primitive::<Int64Type>()
-                        .values()
-                        .iter()
-                        .map(|&v| v.into()),
-                );
-            }
-            t => panic!("{column}: {t}"),
-        }
-    }
-    out
 }
 
 /// BLAKE3 of a file's name then its bytes, as the converter keys its inputs.

@@ -84,25 +84,13 @@ fn convert_measured(args: &[&std::ffi::OsStr]) -> Run {
 
 /// `scaledp/reordered_messages` of every episode, by source path.
 fn reordered_by_source(ds: &Path) -> BTreeMap<String, u64> {
-    use arrow_array::{Array, Int64Array, StringArray};
-    let file = std::fs::File::open(ds.join("meta/episodes/chunk-000/file-000.parquet")).unwrap();
-    let mut out = BTreeMap::new();
-    for batch in parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .unwrap()
-        .build()
-        .unwrap()
-    {
-        let batch = batch.unwrap();
-        let col = |name: &str| batch.column_by_name(name).unwrap().clone();
-        let sources = col("scaledp/source");
-        let sources = sources.as_any().downcast_ref::<StringArray>().unwrap();
-        let n = col("scaledp/reordered_messages");
-        let n = n.as_any().downcast_ref::<Int64Array>().unwrap();
-        for i in 0..batch.num_rows() {
-            out.insert(sources.value(i).to_string(), n.value(i) as u64);
-        }
-    }
-    out
+    let sources = scaledp_tests::episode_column(ds, "scaledp/source");
+    let counts = scaledp_tests::episode_column(ds, "scaledp/reordered_messages");
+    sources
+        .iter()
+        .zip(&counts)
+        .map(|(s, n)| (s.as_str().unwrap().to_string(), n.as_u64().unwrap()))
+        .collect()
 }
 
 #[test]

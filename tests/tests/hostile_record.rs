@@ -10,17 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use scaledp_tests::child::Reap;
 use scaledp_tests::{free_endpoint, python, scaledp_bin, small_franka, write_rig_file};
-
-/// Kills the child when dropped while it still runs.
-struct Reap(std::process::Child);
-
-impl Drop for Reap {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
 
 /// Waits for `child` at most `limit`; None if it is still running then.
 fn wait_bounded(mut child: std::process::Child, limit: Duration) -> Option<Output> {
@@ -119,7 +110,7 @@ fn a_full_disk_ends_the_run_with_the_os_reason_and_exit_3() {
         Full::FileSizeLimit
     };
     let endpoint = free_endpoint();
-    let _sim = Reap(
+    let _sim = Reap::new(
         Command::new(scaledp_bin())
             .args(["sim", "--duration", "120", "-q", "--listen", &endpoint])
             .arg("--rig")

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 
 use scaledp_recorder::net;
 use scaledp_schema::rig::TopicSpec;
+use scaledp_tests::child::{wait_status, Reap};
 use scaledp_tests::{
     episode_metadata, free_endpoint, numbered_message, python, scaledp_bin, small_franka,
     workspace, write_rig_file,
@@ -17,32 +18,8 @@ use scaledp_tests::{
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
 
-/// Kills the child when dropped while it still runs, so a failing test never leaves it behind.
-struct Reap(Option<std::process::Child>);
-
-impl Drop for Reap {
-    fn drop(&mut self) {
-        if let Some(c) = self.0.as_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-/// Waits (bounded) for the status event `event`, returning it.
-fn wait_status(rx: &mpsc::Receiver<serde_json::Value>, event: &str) -> serde_json::Value {
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let left = deadline
-            .checked_duration_since(Instant::now())
-            .unwrap_or_else(|| panic!("no '{event}' status within 20 s"));
-        match rx.recv_timeout(left) {
-            Ok(v) if v["event"] == event => return v,
-            Ok(v) => assert_ne!(v["event"], "failed", "{v}"),
-            Err(e) => panic!("no '{event}' status: {e}"),
-        }
-    }
-}
+/// How long a status event may take.
+const WAIT: Duration = Duration::from_secs(20);
 
 /// The test's side of the link: a Zenoh session listening on a free loopback endpoint, the
 /// recorder's status events under `prefix` as they arrive, and a blocking publisher per topic
@@ -177,7 +154,7 @@ fn record_command_reports_queue_drops_and_exits_3() {
         }
     }
     control("success");
-    let finished = wait_status(&statuses, "finished");
+    let finished = wait_status(&statuses, "finished", WAIT);
 
     let deadline = Instant::now() + Duration::from_secs(60);
     let status = loop {
@@ -290,14 +267,14 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
     };
     let per_topic = 20;
     press(&mut keys, "space");
-    let refused = wait_status(&statuses, "refused");
+    let refused = wait_status(&statuses, "refused", WAIT);
     assert_eq!(refused["force"], true);
     let problems = refused["problems"].as_array().unwrap();
     assert_eq!(problems.len(), topics.len(), "{refused}");
     let episode =
         |keys: &mut std::process::ChildStdin, end_key: &str, index: u64, outcome: &str| {
             press(keys, "f");
-            let started = wait_status(&statuses, "started");
+            let started = wait_status(&statuses, "started", WAIT);
             assert_eq!(started["episode"], index);
             for k in 0..per_topic {
                 for (t, p) in topics.iter().zip(&publishers) {
@@ -307,7 +284,7 @@ fn keys_on_a_terminal_start_end_discard_and_quit() {
             // The key takes the terminal, the data the Zenoh link: give the data a head start.
             std::thread::sleep(Duration::from_millis(300));
             press(keys, end_key);
-            let finished = wait_status(&statuses, "finished");
+            let finished = wait_status(&statuses, "finished", WAIT);
             assert_eq!(finished["episode"], index);
             assert_eq!(finished["outcome"], outcome);
             finished

@@ -12,35 +12,12 @@ use std::time::{Duration, Instant};
 
 use scaledp_recorder::net;
 use scaledp_sim::SimOptions;
+use scaledp_tests::child::{wait_status, Reap};
 use scaledp_tests::{episode_metadata, free_endpoint, scaledp_bin, small_franka, write_rig_file};
 use zenoh::Wait;
 
-/// Kills the child when dropped while it still runs.
-struct Reap(Option<std::process::Child>);
-
-impl Drop for Reap {
-    fn drop(&mut self) {
-        if let Some(c) = self.0.as_mut() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-/// The next status event `event` (others skipped), within 30 s.
-fn wait_status(rx: &mpsc::Receiver<serde_json::Value>, event: &str) -> serde_json::Value {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    loop {
-        let left = deadline
-            .checked_duration_since(Instant::now())
-            .unwrap_or_else(|| panic!("no '{event}' status within 30 s"));
-        match rx.recv_timeout(left) {
-            Ok(v) if v["event"] == event => return v,
-            Ok(v) => assert_ne!(v["event"], "failed", "{v}"),
-            Err(e) => panic!("no '{event}' status: {e}"),
-        }
-    }
-}
+/// How long a status event may take.
+const WAIT: Duration = Duration::from_secs(30);
 
 #[test]
 fn a_timed_session_takes_words_in_both_phases_and_counts_kept_episodes() {
@@ -70,7 +47,7 @@ fn a_timed_session_takes_words_in_both_phases_and_counts_kept_episodes() {
         })
         .wait()
         .unwrap();
-    let mut child = Reap(Some(
+    let child = Reap(Some(
         Command::new(scaledp_bin())
             .args(["record", "--task", "first task", "--task", "second task"])
             .args([
@@ -100,50 +77,45 @@ fn a_timed_session_takes_words_in_both_phases_and_counts_kept_episodes() {
             .unwrap();
     };
     // Episode 0 starts by itself once the topics are live; discarded while it records.
-    assert_eq!(wait_status(&statuses, "started")["episode"], 0);
+    assert_eq!(wait_status(&statuses, "started", WAIT)["episode"], 0);
     std::thread::sleep(Duration::from_millis(300));
     control("discard");
-    let discarded = wait_status(&statuses, "finished");
+    let discarded = wait_status(&statuses, "finished", WAIT);
     assert_eq!(
         (&discarded["episode"], &discarded["outcome"]),
         (&0.into(), &"discarded".into())
     );
     // Episode 1 after the reset; it ends on its timer, held, and is labelled in its reset.
     let t = Instant::now();
-    assert_eq!(wait_status(&statuses, "started")["episode"], 1);
+    assert_eq!(wait_status(&statuses, "started", WAIT)["episode"], 1);
     assert!(
         t.elapsed() >= Duration::from_millis(400),
         "{:?}",
         t.elapsed()
     );
-    let ended = wait_status(&statuses, "ended");
+    let ended = wait_status(&statuses, "ended", WAIT);
     assert_eq!(ended["episode"], 1);
     let verdict = ended["verdict"].clone();
     assert!(verdict["accepted"].is_boolean(), "{ended}");
     control("success");
     control("next-task");
-    let one = wait_status(&statuses, "finished");
+    let one = wait_status(&statuses, "finished", WAIT);
     assert_eq!(
         (&one["episode"], &one["outcome"]),
         (&1.into(), &"success".into())
     );
     assert_eq!(one["verdict"], verdict);
-    assert_eq!(wait_status(&statuses, "task")["task"], "second task");
+    assert_eq!(wait_status(&statuses, "task", WAIT)["task"], "second task");
     // Episode 2, the last: kept unlabelled when its reset is over, then the session ends.
-    assert_eq!(wait_status(&statuses, "started")["episode"], 2);
-    assert_eq!(wait_status(&statuses, "ended")["episode"], 2);
-    let two = wait_status(&statuses, "finished");
+    assert_eq!(wait_status(&statuses, "started", WAIT)["episode"], 2);
+    assert_eq!(wait_status(&statuses, "ended", WAIT)["episode"], 2);
+    let two = wait_status(&statuses, "finished", WAIT);
     assert_eq!(
         (&two["episode"], &two["outcome"]),
         (&2.into(), &"unlabeled".into())
     );
 
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while child.0.as_mut().unwrap().try_wait().unwrap().is_none() {
-        assert!(Instant::now() < deadline, "scaledp record did not exit");
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let output = child.0.take().unwrap().wait_with_output().unwrap();
+    let output = child.output_within(Duration::from_secs(30));
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(0), "{stderr}");
     assert!(
