@@ -8,9 +8,13 @@
 //!
 //! Its own crate because three places must apply the very same rules: `scaledp convert`
 //! (training data), the recorder's verdict on each episode before the scene is reset, and
-//! `serve`'s live observations. It depends on nothing but serde.
+//! `serve`'s live observations; so do the stamps put in order before it ([`StampOrder`]).
+//! It depends on nothing but serde and thiserror.
 
 use serde::{Deserialize, Serialize};
+
+mod order;
+pub use order::{ClockJump, StampOrder, DEFAULT_REORDER_WINDOW_S, MAX_HOLE_NS};
 
 /// A camera frame older than this many frame periods at its tick makes the tick invalid
 /// (`scaledp convert --stale-periods`).

@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::frames::FrameStore;
 use crate::images::{ChannelHistogram, EncodeSpec, EncodedFrame};
 use crate::options::ConvertOptions;
-use crate::series::{messages_of, stamp_of, Ordered};
+use crate::series::{messages_of, ordered, stamp_of};
 use crate::source::Recording;
 use crate::stats::Stats;
 use scaledp_align::{Alignment, Stream};
@@ -111,7 +111,7 @@ fn stream_of(
             reason: format!("{what} ({topic}) {}", silent()),
         });
     }
-    let ordered = Ordered::new(path, topic, &stamps, opts.reorder_window_ns())?;
+    let ordered = ordered(path, topic, &stamps, opts.reorder_window_ns())?;
     Ok(CameraStream {
         stream: Stream::new(
             topic,

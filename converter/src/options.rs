@@ -187,7 +187,7 @@ impl Default for ConvertOptions {
             use_log_time: false,
             window_ns: None,
             topic_overrides: Vec::new(),
-            reorder_window_s: 0.1,
+            reorder_window_s: scaledp_align::DEFAULT_REORDER_WINDOW_S,
             video: None,
             action_space: ActionSpace::Tcp,
             depth: true,

@@ -7,17 +7,18 @@
 //! ([`DEFAULT_STALE_PERIODS`], [`DEFAULT_MAX_INVALID_FRACTION`]). Left to the converter: image
 //! decoding and kinematics (a pose the arm's model cannot reach).
 
-use scaledp_align::{align, Stream, DEFAULT_MAX_INVALID_FRACTION, DEFAULT_STALE_PERIODS};
+use scaledp_align::{
+    align, StampOrder, Stream, DEFAULT_MAX_INVALID_FRACTION, DEFAULT_REORDER_WINDOW_S,
+    DEFAULT_STALE_PERIODS,
+};
 use scaledp_schema::msg::JointState;
 use scaledp_schema::rig::{Rig, TopicKind, TopicSpec};
 use scaledp_schema::RosMessage;
 
 use crate::verdict::{TopicVerdict, Verdict};
 
-/// `scaledp convert`'s default reorder window (`ConvertOptions::reorder_window_s`, 0.1 s).
-const REORDER_WINDOW_NS: u64 = 100_000_000;
-/// The converter's longest hole between stamps of a topic (1 h) before it calls it a clock jump.
-const MAX_HOLE_NS: u64 = 3_600_000_000_000;
+/// `scaledp convert`'s default reorder window, in ns.
+const REORDER_WINDOW_NS: u64 = (DEFAULT_REORDER_WINDOW_S * 1e9) as u64;
 /// A topic that ends (or begins) more than this many of its periods, and half a second, before
 /// the episode's last stamp (after its first) is named.
 const EDGE_PERIODS: f64 = 3.0;
@@ -195,38 +196,11 @@ impl Evidence {
     }
 }
 
-/// The converter's `Ordered`: stamps in stamp order, or the reason it refuses them.
+/// Stamps in stamp order as the converter takes them, or the clock jump it refuses them for.
 fn ordered(topic: &str, stamps: &[u64]) -> Result<Vec<u64>, String> {
-    let mut latest = 0u64;
-    let mut moved = false;
-    for (i, &s) in stamps.iter().enumerate() {
-        if s >= latest {
-            if i > 0 && s - latest > MAX_HOLE_NS {
-                return Err(format!(
-                    "time jumps forward on {topic}: message {i} is stamped {s} ns, {:.0} s \
-                     after the one before: a clock jump",
-                    (s - latest) as f64 * 1e-9
-                ));
-            }
-            latest = s;
-            continue;
-        }
-        let behind = latest - s;
-        if behind > REORDER_WINDOW_NS {
-            return Err(format!(
-                "time runs backwards on {topic}: message {i} is stamped {s} ns, {:.3} s before \
-                 an earlier message ({latest} ns), beyond the {:.3} s reorder window: a clock jump",
-                behind as f64 * 1e-9,
-                REORDER_WINDOW_NS as f64 * 1e-9
-            ));
-        }
-        moved = true;
-    }
-    let mut out = stamps.to_vec();
-    if moved {
-        out.sort_unstable();
-    }
-    Ok(out)
+    StampOrder::new(topic, stamps, REORDER_WINDOW_NS)
+        .map(|o| o.sorted(stamps))
+        .map_err(|e| e.to_string())
 }
 
 /// The joint check of `names` on `topic`'s series.

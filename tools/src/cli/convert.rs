@@ -79,7 +79,7 @@ pub struct ConvertArgs {
     /// Put a message back in stamp order when it is stamped up to this long before one stored
     /// earlier on its topic (a wobbling driver, a second publisher); further back is a clock jump
     /// and the episode is rejected.
-    #[arg(long, value_name = "SECONDS", default_value_t = 0.1)]
+    #[arg(long, value_name = "SECONDS", default_value_t = scaledp_converter::align::DEFAULT_REORDER_WINDOW_S)]
     pub reorder_window: f64,
     /// Convert only slice I of N of the sorted inputs (e.g. $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT).
     #[arg(long, value_name = "I/N", value_parser = parse_shard)]
