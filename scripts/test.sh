@@ -91,7 +91,8 @@ step "scaledp_data wheel"
 # which wait on processes and sockets much of the time, it takes only the cores they leave.
 nice -n 19 bash scripts/check-deps.sh --install-only > target/check-deps.log 2>&1 &
 machete_pid=$!
-cargo test --release --workspace --locked
+# --no-fail-fast: every test executable runs, so one failure does not hide the others'.
+cargo test --release --workspace --locked --no-fail-fast
 step "cargo test"
 
 wait "$machete_pid" || { cat target/check-deps.log; exit 1; }
