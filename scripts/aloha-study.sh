@@ -16,16 +16,16 @@ cd "$(dirname "$0")/.."
 bin=${1:?usage: scripts/aloha-study.sh PATH-TO-CLEAN-SCALEDP-BINARY}
 [ -x "$bin" ] || { echo "$bin: not an executable" >&2; exit 2; }
 
-run() {
-  echo "=== $(date -u +%FT%TZ) $bin experiment compare --benchmark aloha $*"
-  "$bin" experiment compare --benchmark aloha "$@"
+# compare BENCHMARK ARGS…: one logged `experiment compare`; `run` is ALOHA's.
+compare() {
+  local benchmark=$1
+  shift
+  echo "=== $(date -u +%FT%TZ) $bin experiment compare --benchmark $benchmark $*"
+  "$bin" experiment compare --benchmark "$benchmark" "$@"
   echo "=== exit $? at $(date -u +%FT%TZ)"
 }
-metaworld() {
-  echo "=== $(date -u +%FT%TZ) $bin experiment compare --benchmark metaworld $*"
-  "$bin" experiment compare --benchmark metaworld "$@"
-  echo "=== exit $? at $(date -u +%FT%TZ)"
-}
+run() { compare aloha "$@"; }
+metaworld() { compare metaworld "$@"; }
 
 # 1. Transfer-cube, the 2,500-step arms, seed 0 then seed 1 (controls once, with `ti` seed 0).
 run --tasks transfer-cube --arms ti
