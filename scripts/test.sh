@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, from a fresh clone (what CI runs, through .ci/run): Python peers into
-# .venv, formatting, one release build shared by the binaries, the tests and the demo, clippy
-# with warnings as errors, the scaledp_data wheel, every test, and a check for unused
-# dependencies. Prints how long each step took and the total.
+# .venv, formatting, one release build shared by the binaries, the tests and the demo, the
+# scaledp_data wheel, every test with clippy (warnings as errors) beside them, and a check for
+# unused dependencies. Prints how long each step took and the total.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -17,15 +17,18 @@ step() {
 }
 report() {
   local rc=$?
-  # A failed step leaves no venv or cargo-machete install running behind it.
+  # A failed step leaves no venv, cargo-machete install, clippy or test run behind it.
   if [ -n "${venvs_pid:-}" ] && kill -0 "$venvs_pid" 2>/dev/null; then
     pkill -P "$venvs_pid" 2>/dev/null || true
     kill "$venvs_pid" 2>/dev/null || true
   fi
-  if [ -n "${machete_pid:-}" ] && kill -0 "$machete_pid" 2>/dev/null; then
-    pkill -P "$machete_pid" 2>/dev/null || true
-    kill "$machete_pid" 2>/dev/null || true
-  fi
+  local pid
+  for pid in "${machete_pid:-}" "${clippy_pid:-}" "${test_pid:-}"; do
+    if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
+      pkill -P "$pid" 2>/dev/null || true
+      kill "$pid" 2>/dev/null || true
+    fi
+  done
   echo
   echo "== scripts/test.sh timings =="
   printf '%s\n' "${steps[@]}"
@@ -77,23 +80,48 @@ step "cargo build --release"
 # target/cargo-timings/cargo-timing.html.
 python3 scripts/timings.py target/cargo-timings/cargo-timing.html 15 || true
 
-# Check mode in the release profile: build scripts and proc-macros are the ones just built.
-cargo clippy --release --workspace --all-targets --locked -- -D warnings
-step "cargo clippy -D warnings"
-
 wait_venvs
 step "waiting for the venvs"
 
 bash scripts/build-python.sh   # the scaledp_data wheel, reusing that build
 step "scaledp_data wheel"
 
-# cargo-machete compiles from source on a fresh clone (~40 s of CPU): niced beside the tests,
-# which wait on processes and sockets much of the time, it takes only the cores they leave.
+# The tests wait on child processes and sockets much of the time (a fresh clone's ran at 1.4 of
+# the 2 cores): clippy and cargo-machete's install use what they leave, niced so that the
+# rate-bound tests keep their cores. cargo-machete builds in its own target dir.
 nice -n 19 bash scripts/check-deps.sh --install-only > target/check-deps.log 2>&1 &
 machete_pid=$!
 # --no-fail-fast: every test executable runs, so one failure does not hide the others'.
-cargo test --release --workspace --locked --no-fail-fast
+test_log=target/cargo-test.stderr
+cargo test --release --workspace --locked --no-fail-fast 2> >(tee "$test_log" >&2) &
+test_pid=$!
+# Clippy needs the build directory's lock, which `cargo test` holds until its executables are
+# built and released before it runs the first: start clippy then (check mode in the release
+# profile, so build scripts and proc-macros are the ones already built; dependencies are
+# re-checked, as check metadata is not the build's: ~2.5 min of CPU).
+for _ in $(seq 1200); do
+  grep -q '^ *Running ' "$test_log" 2>/dev/null && break
+  kill -0 "$test_pid" 2>/dev/null || break
+  sleep 0.5
+done
+clippy_log=target/clippy.log
+clippy_start=$(date +%s)
+( nice -n 19 cargo clippy --release --workspace --all-targets --locked -- -D warnings
+  echo "clippy done after $(( $(date +%s) - clippy_start )) s" ) > "$clippy_log" 2>&1 &
+clippy_pid=$!
+test_rc=0
+wait "$test_pid" || test_rc=$?
 step "cargo test"
+clippy_rc=0
+wait "$clippy_pid" || clippy_rc=$?
+step "cargo clippy -D warnings (rest)"
+steps+=("$(printf '%-28s %4s s' "  (clippy, from the tests)" "$(sed -n 's/^clippy done after \([0-9]*\) s$/\1/p' "$clippy_log")")")
+if [ "$clippy_rc" -ne 0 ]; then
+  echo "cargo clippy -D warnings failed (its log, $clippy_log):"
+  cat "$clippy_log"
+  exit 1
+fi
+[ "$test_rc" -eq 0 ] || { echo "cargo test failed (exit $test_rc): the failures are listed above"; exit "$test_rc"; }
 
 wait "$machete_pid" || { cat target/check-deps.log; exit 1; }
 bash scripts/check-deps.sh
