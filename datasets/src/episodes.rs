@@ -182,23 +182,3 @@ pub(crate) fn format_path(
     out.push_str(rest);
     Ok(out)
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn lerobot_video_path_template_is_filled() {
-        assert_eq!(
-            format_path(DEFAULT_VIDEO_PATH, "observation.images.top", 0, 12).unwrap(),
-            "videos/observation.images.top/chunk-000/file-012.mp4"
-        );
-        assert_eq!(
-            format_path("v/{chunk_index}/{file_index:05d}.mp4", "k", 3, 7).unwrap(),
-            "v/3/00007.mp4"
-        );
-        assert!(format_path("v/{oops}.mp4", "k", 0, 0).is_err());
-        assert!(format_path("v/{chunk_index.mp4", "k", 0, 0).is_err());
-        assert!(format_path(DEFAULT_VIDEO_PATH, "k", -1, 0).is_err());
-    }
-}

@@ -36,7 +36,9 @@ pub use loader::{Loader, LoaderState};
 pub use meta::Feature;
 pub use normalize::{Affine, Norm, Normalizer};
 pub use options::LoaderOptions;
-pub use sampler::{split_episodes, window, Split, Window};
+pub use sampler::{
+    samples, split_episodes, streaming_order, window, Sample, Split, StreamSpec, Window,
+};
 pub use shared::{DatasetInfo, ImagePool};
 
 /// An encoded image [`decode_image`] could not decode (corrupt, not JPEG or PNG, claiming
@@ -53,6 +55,30 @@ impl From<ImageError> for String {
     fn from(e: ImageError) -> Self {
         e.reason
     }
+}
+
+/// LeRobot's `video_path` when `info.json` gives none.
+pub const DEFAULT_VIDEO_PATH: &str = episodes::DEFAULT_VIDEO_PATH;
+
+/// A LeRobot path template (`info.json`'s `video_path`) that cannot be filled: an unknown or
+/// unclosed field, or a negative chunk or file index.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{reason}")]
+pub struct TemplateError {
+    /// What is wrong.
+    pub reason: String,
+}
+
+/// Fills LeRobot's path template (Python format fields `{video_key}`, `{chunk_index:03d}`,
+/// `{file_index:03d}`) for one video key, chunk and file: the loader's own, for tools that find
+/// a dataset's video files as it does.
+pub fn video_path(
+    template: &str,
+    key: &str,
+    chunk: i64,
+    file: i64,
+) -> std::result::Result<String, TemplateError> {
+    episodes::format_path(template, key, chunk, file).map_err(|reason| TemplateError { reason })
 }
 
 /// Decodes an encoded image (JPEG or PNG) into `dst`, channel-first RGB of `width` × `height`

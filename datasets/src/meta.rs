@@ -217,36 +217,3 @@ fn flatten(v: &serde_json::Value, out: &mut Vec<f64>) {
         _ => {}
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::Feature;
-
-    fn image(shape: &[usize], names: serde_json::Value) -> Feature {
-        Feature {
-            dtype: "image".into(),
-            shape: shape.to_vec(),
-            names: Some(names),
-        }
-    }
-
-    #[test]
-    fn image_sizes_follow_names_then_the_channel_axis() {
-        let hwc = serde_json::json!(["height", "width", "channels"]);
-        assert_eq!(image(&[240, 320, 3], hwc).image_size(), Some((320, 240)));
-        let chw = serde_json::json!(["channels", "height", "width"]);
-        assert_eq!(image(&[3, 240, 320], chw).image_size(), Some((320, 240)));
-        // No names: the axis holding 1, 3 or 4 channels decides.
-        let none = serde_json::Value::Null;
-        assert_eq!(
-            image(&[3, 96, 128], none.clone()).image_size(),
-            Some((128, 96))
-        );
-        assert_eq!(
-            image(&[96, 128, 3], none.clone()).image_size(),
-            Some((128, 96))
-        );
-        assert_eq!(image(&[96, 128, 7], none.clone()).image_size(), None);
-        assert_eq!(image(&[96, 128], none).image_size(), None);
-    }
-}

@@ -9,6 +9,7 @@ mod images;
 mod lerobot_video;
 mod normalize;
 mod order;
+mod parts;
 mod streaming;
 mod video;
 mod windows;
