@@ -91,6 +91,11 @@ step "scaledp_data wheel"
 # rate-bound tests keep their cores. cargo-machete builds in its own target dir.
 nice -n 19 bash scripts/check-deps.sh --install-only > target/check-deps.log 2>&1 &
 machete_pid=$!
+# The Python processes the tests start (simulators, LeRobot, torch) cache their bytecode in
+# target/pycache, so that only the first compiles each module: the venvs are installed without
+# it, and a CI image may set PYTHONDONTWRITEBYTECODE.
+unset PYTHONDONTWRITEBYTECODE
+export PYTHONPYCACHEPREFIX="$PWD/target/pycache"
 # --no-fail-fast: every test executable runs, so one failure does not hide the others'.
 test_log=target/cargo-test.stderr
 cargo test --release --workspace --locked --no-fail-fast 2> >(tee "$test_log" >&2) &

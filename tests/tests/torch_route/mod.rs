@@ -144,7 +144,11 @@ pub fn py() -> Command {
     cmd.env("PYTHONPATH", &fixture().site)
         .env("GLOO_SOCKET_IFNAME", "lo")
         .env("OMP_NUM_THREADS", "1")
-        .env("PYTHONDONTWRITEBYTECODE", "1")
+        // Bytecode cached under target/, never beside the wheel's or the venv's sources: each of
+        // these processes imports torch, and compiling its modules again in every one of them
+        // cost these tests 25 s of their 82 s of CPU (58 s of wall time, now 43).
+        .env_remove("PYTHONDONTWRITEBYTECODE")
+        .env("PYTHONPYCACHEPREFIX", workspace().join("target/pycache"))
         .env("PYTHONFAULTHANDLER", "1")
         .stdin(Stdio::null());
     cmd
