@@ -18,12 +18,8 @@ step() {
 report() {
   local rc=$?
   # A failed step leaves no venv, cargo-machete install, clippy or test run behind it.
-  if [ -n "${venvs_pid:-}" ] && kill -0 "$venvs_pid" 2>/dev/null; then
-    pkill -P "$venvs_pid" 2>/dev/null || true
-    kill "$venvs_pid" 2>/dev/null || true
-  fi
   local pid
-  for pid in "${machete_pid:-}" "${clippy_pid:-}" "${test_pid:-}"; do
+  for pid in "${venvs_pid:-}" "${machete_pid:-}" "${clippy_pid:-}" "${test_pid:-}"; do
     if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
       pkill -P "$pid" 2>/dev/null || true
       kill "$pid" 2>/dev/null || true
@@ -111,8 +107,10 @@ for _ in $(seq 1200); do
 done
 clippy_log=target/clippy.log
 clippy_start=$(date +%s)
-( nice -n 19 cargo clippy --release --workspace --all-targets --locked -- -D warnings
-  echo "clippy done after $(( $(date +%s) - clippy_start )) s" ) > "$clippy_log" 2>&1 &
+( rc=0
+  nice -n 19 cargo clippy --release --workspace --all-targets --locked -- -D warnings || rc=$?
+  echo "clippy done after $(( $(date +%s) - clippy_start )) s"
+  exit "$rc" ) > "$clippy_log" 2>&1 &
 clippy_pid=$!
 test_rc=0
 wait "$test_pid" || test_rc=$?
