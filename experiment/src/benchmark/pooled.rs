@@ -3,7 +3,9 @@
 //! counts gives p < 0.05 (two-sided) *and* X passes at least as many test seeds as Y on every
 //! training seed both have, with at least two seeds each; significant but with fewer seeds it
 //! reads "on seed N"; significant with the seeds disagreeing, "the seeds disagree"; otherwise
-//! "no difference shown". The README's results summary is this table.
+//! "no difference shown". The test and its reading use the training seeds both arms have, so
+//! an arm with one seed is held against the recipe's same seed, not the recipe's seeds pooled.
+//! The README's results summary is this table.
 
 use super::files::TaskResult;
 use super::replicates::replicates;
@@ -24,7 +26,16 @@ fn pooled(rs: &[&TaskResult]) -> EvalFigures {
     f
 }
 
-/// The reading of `arm` (its results `rs`) against the recipe's `base` on one task.
+/// The results of `rs` whose training seed `other` also has.
+fn shared<'a>(rs: &[&'a TaskResult], other: &[&TaskResult]) -> Vec<&'a TaskResult> {
+    rs.iter()
+        .filter(|r| other.iter().any(|o| o.train_seed == r.train_seed))
+        .copied()
+        .collect()
+}
+
+/// The reading of `arm` (its results `rs`) against the recipe's `base` on one task, both
+/// holding only the training seeds they share.
 fn reading(rs: &[&TaskResult], base: &[&TaskResult], p: Option<f64>) -> String {
     if !p.is_some_and(|p| p < 0.05) {
         return "no difference shown".into();
@@ -43,7 +54,7 @@ fn reading(rs: &[&TaskResult], base: &[&TaskResult], p: Option<f64>) -> String {
     let agree = common
         .iter()
         .all(|&(x, y)| if above { x >= y } else { x <= y });
-    if rs.len() < 2 || base.len() < 2 || common.len() < 2 {
+    if common.len() < 2 {
         let seeds: Vec<String> = rs.iter().map(|r| r.train_seed.to_string()).collect();
         format!("{word} `{RECIPE}`, on seed {} only", seeds.join(", "))
     } else if agree {
@@ -72,11 +83,14 @@ pub(super) fn table(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> 
                 .map(|r| format!("{}/{}", r.test.successes, r.test.episodes))
                 .collect();
             let all = pooled(&rs);
+            let (mine, theirs) = (shared(&rs, &base), shared(&base, &rs));
             let (p, read) = if *arm == RECIPE || base.is_empty() {
                 (None, "–".to_string())
+            } else if mine.is_empty() {
+                (None, format!("no training seed in common with `{RECIPE}`"))
             } else {
-                let p = fisher_two_sided(&all, &pooled(&base));
-                (p, reading(&rs, &base, p))
+                let p = fisher_two_sided(&pooled(&mine), &pooled(&theirs));
+                (p, reading(&mine, &theirs, p))
             };
             rows.push_str(&format!(
                 "| {task} | `{arm}` | {} | {}/{} ({:.0} %, {:.0}–{:.0} %) | {} | {read} |\n",
@@ -98,7 +112,7 @@ pub(super) fn table(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> 
         return String::new();
     }
     format!(
-        "| task | arm | per training seed (0, 1, …) | pooled (95 % Wilson) | Fisher p against `{RECIPE}`, pooled | reading |\n\
+        "| task | arm | per training seed (0, 1, …) | pooled (95 % Wilson) | Fisher p against `{RECIPE}`, the seeds both have pooled | reading |\n\
          |---|---|---|---|---|---|\n{rows}"
     )
 }
@@ -134,6 +148,11 @@ mod tests {
         assert!(md.contains("| `ti-sincos` | 3/50, 40/50 | 43/100"), "{md}");
         assert!(md.contains("no difference shown"), "{md}");
         assert!(md.contains("above `ti`, on seed 0 only"), "{md}");
+        // The one-seed arm is tested against `ti` seed 0 (47/50 against 14/50).
+        assert!(
+            md.contains("| `s` | 47/50 | 47/50 (94 %, 84–98 %) | < 0.001 |"),
+            "{md}"
+        );
         // Significant pooled, seeds pulling apart.
         let split = vec![
             result("ti", 0, 10),
@@ -143,5 +162,29 @@ mod tests {
         ];
         let md = table(&tasks, &arms, &split);
         assert!(md.contains("the seeds disagree"), "{md}");
+    }
+
+    /// Held against the recipe's same seed: 30/50 is not above `ti` seed 0's 20/50 (p = 0.06),
+    /// though against `ti`'s two seeds pooled (24/100) it would be (p < 0.001).
+    #[test]
+    fn a_one_seed_arm_meets_the_recipe_on_its_own_seed() {
+        let tasks = vec!["transfer-cube".to_string()];
+        let rs = vec![
+            result("ti", 0, 20),
+            result("ti", 1, 4),
+            result("ti-causal", 0, 30),
+            result("s", 2, 45),
+        ];
+        let md = table(&tasks, &["ti", "ti-causal", "s"], &rs);
+        assert!(
+            md.contains(
+                "| `ti-causal` | 30/50 | 30/50 (60 %, 46–72 %) | 0.071 | no difference shown |"
+            ),
+            "{md}"
+        );
+        assert!(
+            md.contains("| `s` | 45/50 | 45/50 (90 %, 79–96 %) | – | no training seed in common with `ti` |"),
+            "{md}"
+        );
     }
 }
