@@ -20,9 +20,9 @@ pub(super) fn level_means(
     arms: &[&str],
     results: &[TaskResult],
 ) -> Means {
-    level_figures(tasks, arms, results)
+    level_figures(tasks, arms, results, true)
         .into_iter()
-        .map(|(l, n, v)| (l, (n, v.into_iter().map(|f| f.mean).collect())))
+        .map(|(l, n, v)| (l, (n, v.into_iter().flatten().map(|f| f.mean).collect())))
         .collect()
 }
 
@@ -35,12 +35,15 @@ struct LevelFigure {
     episodes: u64,
 }
 
-/// [`level_means`] with each arm's pooled episodes.
+/// [`level_means`] with each arm's pooled episodes. With `every_arm`, a level holds only the
+/// tasks where every arm has a result (so its means compare like with like); without it, every
+/// task where any arm has one, and an arm without a result on it has no figure (`None`).
 fn level_figures(
     tasks: &[(Level, String)],
     arms: &[&str],
     results: &[TaskResult],
-) -> Vec<(Level, usize, Vec<LevelFigure>)> {
+    every_arm: bool,
+) -> Vec<(Level, usize, Vec<Option<LevelFigure>>)> {
     let replicate_mean = |t: &str, a: &str| {
         let rs = replicates(results, t, a);
         rs.iter().map(|r| r.test_success_rate).sum::<f64>() / rs.len().max(1) as f64
@@ -52,7 +55,13 @@ fn level_figures(
         let full: Vec<&String> = tasks
             .iter()
             .filter(|(l, t)| {
-                l == level && arms.iter().all(|a| !replicates(results, t, a).is_empty())
+                let has = |a: &&str| !replicates(results, t, a).is_empty();
+                l == level
+                    && if every_arm {
+                        arms.iter().all(has)
+                    } else {
+                        arms.iter().any(has)
+                    }
             })
             .map(|(_, t)| t)
             .collect();
@@ -62,16 +71,23 @@ fn level_figures(
         let figures = arms
             .iter()
             .map(|a| {
-                let pooled = full.iter().flat_map(|t| replicates(results, t, a));
+                let mine: Vec<&&String> = full
+                    .iter()
+                    .filter(|t| !replicates(results, t, a).is_empty())
+                    .collect();
+                if mine.is_empty() {
+                    return None;
+                }
+                let pooled = mine.iter().flat_map(|t| replicates(results, t, a));
                 let (successes, episodes) = pooled.fold((0, 0), |(k, n), r| {
                     (k + r.test.successes, n + r.test.episodes)
                 });
-                LevelFigure {
-                    mean: full.iter().map(|t| replicate_mean(t, a)).sum::<f64>()
-                        / full.len() as f64,
+                Some(LevelFigure {
+                    mean: mine.iter().map(|t| replicate_mean(t, a)).sum::<f64>()
+                        / mine.len() as f64,
                     successes,
                     episodes,
-                }
+                })
             })
             .collect();
         out.push((level.clone(), full.len(), figures));
@@ -100,7 +116,8 @@ const COLOURS: [RGBColor; 7] = [
 
 /// Grouped bars: per level (or per task, when every task has the same level), each arm's mean
 /// test success, with the 95 % Wilson interval of its pooled episodes as a whisker, and each
-/// group's name under it.
+/// group's name under it. Per level only the tasks every arm has count (as in the table's
+/// means); per task every task is drawn, with a bar for each arm that has a result on it.
 pub(super) fn plot(
     benchmark: &str,
     tasks: &[(Level, String)],
@@ -114,9 +131,9 @@ pub(super) fn plot(
             .iter()
             .map(|(_, t)| (level_of(t), t.clone()))
             .collect();
-        level_figures(&per_task, arms, results)
+        level_figures(&per_task, arms, results, false)
     } else {
-        level_figures(tasks, arms, results)
+        level_figures(tasks, arms, results, true)
     };
     let err = |e: String| anyhow!("plot: {e}");
     let root = SVGBackend::new(path, (800, 480)).into_drawing_area();
@@ -149,9 +166,13 @@ pub(super) fn plot(
         let bars: Vec<Rectangle<(f64, f64)>> = groups
             .iter()
             .enumerate()
-            .map(|(g, (_, _, v))| {
+            .filter_map(|(g, (_, _, v))| {
                 let x0 = g as f64 + 0.1 + k as f64 * width;
-                Rectangle::new([(x0, 0.0), (x0 + width * 0.9, v[k].mean)], c.filled())
+                let f = v[k]?;
+                Some(Rectangle::new(
+                    [(x0, 0.0), (x0 + width * 0.9, f.mean)],
+                    c.filled(),
+                ))
             })
             .collect();
         chart
@@ -159,10 +180,14 @@ pub(super) fn plot(
             .map_err(|e| err(e.to_string()))?
             .label(arm.to_string())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
-        let whiskers = groups.iter().enumerate().map(|(g, (_, _, v))| {
+        let whiskers = groups.iter().enumerate().filter_map(|(g, (_, _, v))| {
             let x = g as f64 + 0.1 + k as f64 * width + width * 0.45;
-            let (lo, hi) = scaledp_deploy::wilson_interval(v[k].successes, v[k].episodes);
-            PathElement::new(vec![(x, lo), (x, hi)], BLACK.stroke_width(2))
+            let f = v[k]?;
+            let (lo, hi) = scaledp_deploy::wilson_interval(f.successes, f.episodes);
+            Some(PathElement::new(
+                vec![(x, lo), (x, hi)],
+                BLACK.stroke_width(2),
+            ))
         });
         chart
             .draw_series(whiskers)

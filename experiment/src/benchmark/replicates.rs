@@ -176,4 +176,30 @@ mod tests {
         let whiskers = svg.matches(r#"stroke-width="2" points"#).count();
         assert_eq!(whiskers, 4, "{svg}");
     }
+
+    /// Per task (ALOHA), a task is drawn with the arms it has: insertion, where only `ti` has
+    /// landed, was missing from the plot while the level means (which compare like with like)
+    /// rightly leave it out.
+    #[test]
+    fn the_per_task_plot_draws_a_task_that_lacks_an_arm() {
+        let dir = tempfile::tempdir().unwrap();
+        for (task, arm, k) in [
+            ("transfer-cube", "ti", 20),
+            ("transfer-cube", "ti-sincos", 3),
+            ("insertion", "ti", 4),
+        ] {
+            let mut r = result(arm, 0, k);
+            r.task = task.into();
+            let path = result_path(dir.path(), task, arm, 0);
+            std::fs::write(path, serde_json::to_vec(&r).unwrap()).unwrap();
+        }
+        rebuild(dir.path()).unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("success_by_level.svg")).unwrap();
+        assert!(svg.contains("\ninsertion\n"), "{svg}");
+        assert!(svg.contains("\ntransfer-cube\n"), "{svg}");
+        let whiskers = svg.matches(r#"stroke-width="2" points"#).count();
+        assert_eq!(whiskers, 3, "{svg}");
+        let md = std::fs::read_to_string(dir.path().join("table.md")).unwrap();
+        assert!(md.contains("| bimanual | 1 | 40.0 % | 6.0 % |"), "{md}");
+    }
 }
