@@ -128,7 +128,7 @@ pub struct ReportArgs {
     #[arg(long, default_value = "docs/results")]
     pub results: PathBuf,
     /// Also rewrite the results summary of this README (between `<!-- results-summary -->` and
-    /// `<!-- /results-summary -->`) from the benchmark's files.
+    /// `<!-- /results-summary -->`) from the files of every benchmark under `--results`.
     #[arg(long)]
     pub readme: Option<PathBuf>,
 }

@@ -53,7 +53,7 @@ pub fn run(command: ExperimentCommand, stop: &Arc<AtomicBool>) -> Result<()> {
             if benchmark::is_benchmark(&dir) {
                 benchmark::rebuild(&dir)?;
                 match &a.readme {
-                    Some(readme) => write_summary(readme, &dir),
+                    Some(readme) => write_summary(readme, &a.results),
                     None => Ok(()),
                 }
             } else {
@@ -66,21 +66,21 @@ pub fn run(command: ExperimentCommand, stop: &Arc<AtomicBool>) -> Result<()> {
 /// Where the README's results summary starts and ends.
 pub const SUMMARY_MARKERS: (&str, &str) = ("<!-- results-summary -->", "<!-- /results-summary -->");
 
-/// The README's results summary as `scaledp experiment report --readme` writes it from the
-/// benchmark results in `dir`: the markers and the pooled table between them.
-pub fn readme_summary(dir: &std::path::Path) -> Result<String> {
+/// The README's results summary as `scaledp experiment report --readme` writes it from every
+/// benchmark's results under `results` (ALOHA, MetaWorld): the markers and, per benchmark, its
+/// pooled table between them.
+pub fn readme_summary(results: &std::path::Path) -> Result<String> {
     let (start, end) = SUMMARY_MARKERS;
-    let table = benchmark::summary(dir)?;
+    let tables = benchmark::summaries(results)?;
     Ok(format!(
-        "{start}\n<!-- written by `scaledp experiment report --name {} --readme README.md` from \
-         docs/results; do not edit -->\n\n{table}\n{end}",
-        dir.file_name()
-            .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+        "{start}\n<!-- written by `scaledp experiment report --name <benchmark> --readme README.md` \
+         from every benchmark under docs/results; do not edit -->\n\n{tables}\n{end}"
     ))
 }
 
-/// Replaces the summary block of `readme` (or the bare start marker) with [`readme_summary`].
-fn write_summary(readme: &std::path::Path, dir: &std::path::Path) -> Result<()> {
+/// Replaces the summary block of `readme` (or the bare start marker) with [`readme_summary`]
+/// of the benchmarks under `results`.
+fn write_summary(readme: &std::path::Path, results: &std::path::Path) -> Result<()> {
     let text =
         std::fs::read_to_string(readme).with_context(|| format!("reading {}", readme.display()))?;
     let (start, end) = SUMMARY_MARKERS;
@@ -93,7 +93,7 @@ fn write_summary(readme: &std::path::Path, dir: &std::path::Path) -> Result<()> 
     let b = text[a..]
         .find(end)
         .map_or(a + start.len(), |k| a + k + end.len());
-    let new = format!("{}{}{}", &text[..a], readme_summary(dir)?, &text[b..]);
+    let new = format!("{}{}{}", &text[..a], readme_summary(results)?, &text[b..]);
     std::fs::write(readme, new).with_context(|| format!("writing {}", readme.display()))?;
     eprintln!("wrote the results summary of {}", readme.display());
     Ok(())

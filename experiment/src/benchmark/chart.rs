@@ -96,7 +96,7 @@ fn level_figures(
 }
 
 /// `MetaWorld`, `ALOHA` (else the name as it is).
-fn display_name(benchmark: &str) -> &str {
+pub(super) fn display_name(benchmark: &str) -> &str {
     match benchmark {
         "metaworld" => "MetaWorld",
         "aloha" => "ALOHA",

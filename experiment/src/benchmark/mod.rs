@@ -29,7 +29,7 @@ use scaledp_schema::{ActionSpace, Rig};
 
 use files::{result_path, run_dir};
 pub use files::{TaskControls, TaskResult};
-pub(crate) use report::{is_benchmark, rebuild, summary};
+pub(crate) use report::{is_benchmark, rebuild, summaries};
 use scoring::score_controls;
 
 use crate::arms::Arm;

@@ -202,4 +202,30 @@ mod tests {
         let md = std::fs::read_to_string(dir.path().join("table.md")).unwrap();
         assert!(md.contains("| bimanual | 1 | 40.0 % | 6.0 % |"), "{md}");
     }
+
+    /// The README's summary holds every benchmark's pooled table under its name, in name order
+    /// (it held ALOHA's alone, so MetaWorld's readings would not have reached the README).
+    #[test]
+    fn the_summary_holds_every_benchmark() {
+        let root = tempfile::tempdir().unwrap();
+        for (bench, task, k) in [("metaworld", "assembly", 30), ("aloha", "insertion", 4)] {
+            let dir = root.path().join(bench);
+            std::fs::create_dir(&dir).unwrap();
+            let mut r = result("ti", 0, k);
+            (r.benchmark, r.task) = (bench.into(), task.into());
+            let path = result_path(&dir, task, "ti", 0);
+            std::fs::write(path, serde_json::to_vec(&r).unwrap()).unwrap();
+        }
+        std::fs::create_dir(root.path().join("historical")).unwrap();
+        let md = super::super::summaries(root.path()).unwrap();
+        let (a, m) = (
+            md.find("**ALOHA**").unwrap(),
+            md.find("**MetaWorld**").unwrap(),
+        );
+        assert!(a < m, "{md}");
+        assert!(md[a..m].contains("| insertion | `ti` | 4/50 |"), "{md}");
+        assert!(md[m..].contains("| assembly | `ti` | 30/50 |"), "{md}");
+        let empty = tempfile::tempdir().unwrap();
+        assert!(super::super::summaries(empty.path()).is_err());
+    }
 }

@@ -4,12 +4,12 @@
 //! files in the results directory.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
 use super::cells::{behaviour, level_of, marked, Level};
-use super::chart::{level_means, plot};
+use super::chart::{display_name, level_means, plot};
 use super::files::{TaskControls, TaskResult};
 use super::pooled;
 use super::replicates::{cell, pairings, replicates};
@@ -285,8 +285,30 @@ fn newest_behaviour(l: &Loaded) -> (u32, bool) {
     (newest, all.iter().any(|&b| b < newest))
 }
 
-/// The README's results summary: the pooled table of the benchmark results in `dir`.
-pub(crate) fn summary(dir: &Path) -> Result<String> {
+/// The README's results summary: for each benchmark under `root` (each directory holding
+/// results, in name order), its name and the pooled table of its files.
+pub(crate) fn summaries(root: &Path) -> Result<String> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(root)
+        .with_context(|| format!("reading {}", root.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| is_benchmark(p))
+        .collect();
+    dirs.sort();
+    let mut parts = Vec::new();
+    for dir in &dirs {
+        let name = dir
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+        parts.push(format!("**{}**\n\n{}", display_name(&name), summary(dir)?));
+    }
+    if parts.is_empty() {
+        bail!("{}: no benchmark results to summarise", root.display());
+    }
+    Ok(parts.join("\n"))
+}
+
+/// The pooled table of the benchmark results in `dir`.
+fn summary(dir: &Path) -> Result<String> {
     let l = load(dir)?;
     let arms = arms_of(&l.results);
     let mut tasks: Vec<(Level, String)> = l
