@@ -44,7 +44,10 @@ run --tasks transfer-cube --arms ti-x3 --no-controls
 #    order changes when each reading lands, not how it is read.
 run --tasks insertion --arms ti,ti-causal
 run --tasks insertion --arms ti,ti-causal --train-seed 1 --no-controls
-metaworld --tasks assembly,hand-insert --arms ti,ti-causal
+#    MetaWorld's controls are scored on the call's first arm: `ti-causal`, because assembly's
+#    `ti` seed 0 trained on a machine since gone (its checkpoints with it) and controls need the
+#    first arm's checkpoints (step 0 for the untrained policy, the last for frozen cameras).
+metaworld --tasks assembly,hand-insert --arms ti-causal,ti
 metaworld --tasks assembly,hand-insert --arms ti,ti-causal --train-seed 1 --no-controls
 # 2. The budget: three times the steps (the rest).
 run --tasks transfer-cube --arms ti-causal-x3 --no-controls
