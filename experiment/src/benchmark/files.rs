@@ -93,6 +93,16 @@ pub(super) fn result_path(dir: &Path, task: &str, arm: &str, seed: u64) -> PathB
     }
 }
 
+/// Whether every file a `compare` call would write for `task` is already in `dir`: each arm's
+/// result from `seed` and, if `controls`, the task's controls. Such a task is skipped whole, so
+/// a machine that lacks its demonstrations does not collect them again.
+pub(super) fn landed(dir: &Path, task: &str, arms: &[&str], seed: u64, controls: bool) -> bool {
+    (!controls || dir.join(format!("{task}--controls.json")).exists())
+        && arms
+            .iter()
+            .all(|arm| result_path(dir, task, arm, seed).exists())
+}
+
 /// The run directory of an arm trained from `seed`.
 pub(super) fn run_dir(task_dir: &Path, arm: &str, seed: u64) -> PathBuf {
     match seed {
@@ -141,5 +151,26 @@ impl TaskResult {
             earlier_scores: Vec::new(),
             rescore_command: None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_task_has_landed_only_when_every_arm_and_its_controls_have() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let touch = |name: &str| std::fs::write(d.join(name), "{}").unwrap();
+        touch("assembly--ti.json");
+        assert!(!landed(d, "assembly", &["ti", "ti-causal"], 0, false));
+        touch("assembly--ti-causal.json");
+        assert!(landed(d, "assembly", &["ti", "ti-causal"], 0, false));
+        assert!(!landed(d, "assembly", &["ti", "ti-causal"], 0, true));
+        assert!(!landed(d, "assembly", &["ti"], 1, false));
+        touch("assembly--controls.json");
+        assert!(landed(d, "assembly", &["ti", "ti-causal"], 0, true));
+        assert!(!landed(d, "hand-insert", &["ti"], 0, false));
     }
 }

@@ -27,7 +27,7 @@ use scaledp_deploy::Split;
 use scaledp_policy::{model::ScaleDp, Policy, TrainOptions};
 use scaledp_schema::{ActionSpace, Rig};
 
-use files::{result_path, run_dir};
+use files::{landed, result_path, run_dir};
 pub use files::{TaskControls, TaskResult};
 pub(crate) use report::{is_benchmark, rebuild, summaries};
 use scoring::score_controls;
@@ -188,6 +188,12 @@ pub(crate) fn run(
         let level = bench.level(task)?;
         let rig = Rig::load_or_builtin(&bench.rig(task))?;
         let task_dir = a.runs.join(&st.name).join(task);
+        let names: Vec<&str> = st.arms.iter().map(|arm| arm.name).collect();
+        let with_controls = !a.no_controls && a.train_seed == 0;
+        if landed(&results_dir, task, &names, a.train_seed, with_controls) {
+            eprintln!("== task {task} ({level}): every arm named has landed, nothing to do");
+            continue;
+        }
         eprintln!("== task {task} ({level})");
         let (dataset, demos) = prepare(&rig, &task_dir, demos, bench.action_space())?;
         same_pictures(&rig, &dataset, &task_dir)?;
@@ -276,7 +282,7 @@ pub(crate) fn run(
             );
             rebuild(&results_dir)?;
         }
-        if !a.no_controls && a.train_seed == 0 {
+        if with_controls {
             if let Some(&first) = st.arms.first() {
                 controls(a, &rig, task, level, first, &task_dir, &results_dir, &plan)?;
             }
@@ -311,6 +317,12 @@ fn controls(
         plan,
     )?
     else {
+        eprintln!(
+            "== {task}: controls not scored: {} has no step-0 and final checkpoints under {} \
+             (name first an arm this machine trained)",
+            arm.name,
+            task_dir.join(arm.name).display()
+        );
         return Ok(());
     };
     let c = TaskControls {
