@@ -67,6 +67,23 @@ fn arms_of(results: &[TaskResult]) -> Vec<&'static str> {
         .collect()
 }
 
+/// Which arm's checkpoints each task's untrained and frozen-camera controls were scored on
+/// (its step 0 and its last): not always the same arm on every benchmark.
+fn controls_arms(controls: &BTreeMap<String, TaskControls>) -> String {
+    if controls.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = controls
+        .iter()
+        .map(|(task, c)| format!("{task} `{}`", c.arm))
+        .collect();
+    format!(
+        "\nThe untrained and frozen-camera controls use the step-0 and last checkpoints of one \
+         arm trained from seed 0: {}.\n",
+        each.join(", ")
+    )
+}
+
 /// Rebuilds `table.md` and `success_by_level.svg` in `dir`.
 pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     let l = load(dir)?;
@@ -115,6 +132,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
         }
         md.push('\n');
     }
+    md.push_str(&controls_arms(&l.controls));
     if older {
         md.push_str(&format!(
             "\n† Scored by an earlier behaviour of the simulator's bridge than the newest here \
