@@ -124,4 +124,8 @@ pub struct DemoArgs {
     /// Steps of the short ScaleDP-Ti training run at the end (0: stop after the loader).
     #[arg(long, default_value_t = 30)]
     pub train_steps: u64,
+    /// Times an episode `scaledp convert` would reject is recorded again (a loaded machine can
+    /// stall the simulated rig); the rejected file moves to `discarded/`.
+    #[arg(long, default_value_t = 2)]
+    pub retries: u64,
 }

@@ -53,14 +53,16 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
         Label::Success,
         &stop,
         topic_labels(&rig),
+        args.retries,
     );
     recorder.finish()?;
     sim.stop();
     let _ = zenoh::Wait::wait(sim_session.close());
 
     let mut per_topic: BTreeMap<&str, (u64, u64, u64)> = BTreeMap::new();
-    let seconds: f64 = tally.finished.iter().map(|r| r.duration_s).sum();
-    for r in &tally.finished {
+    let kept: Vec<_> = tally.kept_episodes().collect();
+    let seconds: f64 = kept.iter().map(|r| r.duration_s).sum();
+    for r in &kept {
         for (topic, n) in &r.summary.messages {
             let e = per_topic.entry(topic).or_default();
             e.0 += n;
@@ -68,9 +70,13 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
             e.2 += r.dropped[topic] + r.upstream_gaps[topic];
         }
     }
+    let again = match tally.rerecorded {
+        0 => String::new(),
+        n => format!(" ({n} recorded again: convert would have rejected them; in discarded/)"),
+    };
     println!(
-        "\n{} episodes, {seconds:.1} s in all, in {}",
-        tally.finished.len(),
+        "\n{} episodes, {seconds:.1} s in all, in {}{again}",
+        kept.len(),
         out.display()
     );
     println!(
@@ -90,11 +96,7 @@ pub fn run(args: DemoArgs) -> Result<ExitStatus> {
     }
     println!("\nopen them in Foxglove or rerun, or: python -c \"from rosbags.highlevel import AnyReader\"");
 
-    let recordings: Vec<PathBuf> = tally
-        .finished
-        .iter()
-        .map(|r| r.summary.path.clone())
-        .collect();
+    let recordings: Vec<PathBuf> = kept.iter().map(|r| r.summary.path.clone()).collect();
     if recordings.is_empty() {
         anyhow::bail!("no episode was recorded");
     }

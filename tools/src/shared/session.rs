@@ -31,15 +31,20 @@ pub struct Tally {
     pub last_refusal: Option<String>,
     /// Why the session ended before its plan did.
     pub stopped: Option<String>,
+    /// Episodes recorded again because convert would have rejected them.
+    pub rerecorded: u64,
 }
 
 impl Tally {
     /// Episodes kept: finished, not discarded, not moved to `discarded/` since.
     pub fn kept(&self) -> usize {
+        self.kept_episodes().count()
+    }
+    /// The episodes [`Tally::kept`] counts, in order.
+    pub fn kept_episodes(&self) -> impl Iterator<Item = &EpisodeReport> {
         self.finished
             .iter()
             .filter(|r| r.outcome != Label::Discarded && !self.moved.contains(&r.index))
-            .count()
     }
     /// Messages lost over the session (queue drops and upstream gaps).
     pub fn lost(&self) -> u64 {
@@ -168,7 +173,9 @@ pub fn wait_for_topics(recorder: &Recorder, timeout_s: f64, stop: &AtomicBool) {
 }
 
 /// Records `episodes` episodes of `duration_s` each (unbounded when `episodes` is None), ending
-/// each with `outcome`; stops early when `stop` is set.
+/// each with `outcome`; stops early when `stop` is set. An episode `scaledp convert` would reject
+/// is recorded again, at most `retries` times, as an operator does before the scene is reset:
+/// the rejected file moves to `discarded/` and does not count.
 pub fn timed_episodes(
     recorder: &Recorder,
     episodes: Option<u64>,
@@ -176,13 +183,19 @@ pub fn timed_episodes(
     outcome: Label,
     stop: &AtomicBool,
     labels: Vec<String>,
+    retries: u64,
 ) -> Tally {
     let mut tally = Tally::default();
     let mut line = StatusLine::new(labels);
     let show = std::io::stderr().is_terminal();
-    let mut n = 0;
+    let (mut n, mut tries) = (0, 0);
     while episodes.is_none_or(|e| n < e) && !stop.load(Ordering::Relaxed) {
-        recorder.send(Command::Start);
+        let finished_before = tally.finished.len();
+        recorder.send(if tries > 0 {
+            Command::Rerecord
+        } else {
+            Command::Start
+        });
         let start = Instant::now();
         // An episode that fails while being written (a full disk) is over: no stop to wait for.
         let mut ended = false;
@@ -206,12 +219,111 @@ pub fn timed_episodes(
         if show {
             eprint!("\r\x1b[2K");
         }
-        n += 1;
         // An episode whose file cannot even be opened: the next would fail alike.
         if let Some(index) = tally.unstartable {
             eprintln!("stopping: episode {index} could not be written");
             break;
         }
+        let rejected = tally.finished[finished_before..]
+            .last()
+            .filter(|r| !r.verdict.accepted);
+        match rejected {
+            Some(r) if tries < retries && !stop.load(Ordering::Relaxed) => {
+                tries += 1;
+                tally.rerecorded += 1;
+                eprintln!(
+                    "episode {}: convert would reject it; recording it again ({tries} of {retries})",
+                    r.index
+                );
+            }
+            _ => {
+                n += 1;
+                tries = 0;
+            }
+        }
     }
     tally
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use scaledp_recorder::{net, Label, RecorderOptions};
+    use scaledp_schema::Rig;
+    use scaledp_sim::SimOptions;
+
+    use super::{timed_episodes, wait_for_topics};
+
+    /// The front camera stalls through the first episode (five frames held 300 ms each), so
+    /// convert would reject it: the session records it again, moves the rejected file to
+    /// `discarded/` and keeps one episode, within the retries allowed.
+    #[test]
+    fn an_episode_convert_would_reject_is_recorded_again_and_moved_aside() {
+        let mut rig = Rig::builtin("franka_2zed").unwrap();
+        for c in &mut rig.cameras {
+            (c.width, c.height, c.depth, c.camera_info_topic) = (32, 24, None, None);
+        }
+        rig.tf = None;
+        rig.extra_topics.clear();
+        let camera = rig.cameras[0].topic.trim_start_matches('/').to_string();
+        let endpoint = format!("tcp/127.0.0.1:{}", crate::shared::free_port().unwrap());
+        let sim_session =
+            net::open(net::zenoh_config(None, &[], std::slice::from_ref(&endpoint)).unwrap())
+                .unwrap();
+        let armed = Arc::new(AtomicBool::new(false));
+        let stalls = Arc::new(AtomicU32::new(5));
+        let (on, left) = (armed.clone(), stalls.clone());
+        let sim = SimOptions::new(rig.clone())
+            .seed(1)
+            .on_publish(Arc::new(move |topic, _| {
+                if topic.contains(&camera)
+                    && on.load(Ordering::Relaxed)
+                    && left
+                        .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| n.checked_sub(1))
+                        .is_ok()
+                {
+                    std::thread::sleep(Duration::from_millis(300));
+                }
+            }))
+            .spawn(&sim_session)
+            .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let recorder = RecorderOptions::new(rig, dir.path())
+            .control_prefix(format!("test/session/{}", std::process::id()))
+            .start(net::zenoh_config(None, &[endpoint], &[]).unwrap())
+            .unwrap();
+        let stop = AtomicBool::new(false);
+        wait_for_topics(&recorder, 15.0, &stop);
+        armed.store(true, Ordering::Relaxed);
+        let tally = timed_episodes(&recorder, Some(1), 1.5, Label::Success, &stop, vec![], 2);
+        recorder.finish().unwrap();
+        sim.stop();
+        let _ = zenoh::Wait::wait(sim_session.close());
+
+        assert_eq!(
+            stalls.load(Ordering::Relaxed),
+            0,
+            "the camera never stalled"
+        );
+        let first = &tally.finished[0];
+        assert!(!first.verdict.accepted, "{}", first.verdict.line());
+        assert!((1..=2).contains(&tally.rerecorded), "{tally:?}");
+        assert_eq!(tally.finished.len() as u64, tally.rerecorded + 1);
+        assert_eq!(tally.kept(), 1, "{tally:?}");
+        let kept = tally.kept_episodes().next().unwrap();
+        assert_eq!(kept.index, tally.rerecorded);
+        let files = |d: &std::path::Path| std::fs::read_dir(d).map_or(0, |r| r.count());
+        assert_eq!(
+            files(&dir.path().join("discarded")) as u64,
+            tally.rerecorded
+        );
+        assert!(kept.summary.path.is_file());
+        assert!(
+            !first.summary.path.exists(),
+            "the rejected file was not moved"
+        );
+    }
 }
