@@ -17,9 +17,9 @@ step() {
 }
 report() {
   local rc=$?
-  # A failed step leaves no venv, cargo-machete install, clippy or test run behind it.
+  # A failed step leaves no venv or cargo-machete install behind it.
   local pid
-  for pid in "${venvs_pid:-}" "${machete_pid:-}" "${clippy_pid:-}" "${test_pid:-}"; do
+  for pid in "${venvs_pid:-}" "${machete_pid:-}"; do
     if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
       pkill -P "$pid" 2>/dev/null || true
       kill "$pid" 2>/dev/null || true
@@ -66,12 +66,24 @@ step "venvs started"
 cargo fmt --all -- --check
 step "cargo fmt --check"
 
-# One build for everything: `cargo run --release --bin scaledp -- demo` (the README) selects the
-# same packages, so its dependencies are these artifacts too. The `tests` crate lists every
-# dev-dependency as a normal one, so building tests adds no features to a shared crate and
-# nothing compiles twice.
+# Clippy runs inside the build: cargo compiles the workspace's own crates with clippy-driver
+# (rustc with clippy's lints; the wrapper `cargo clippy` itself sets) and the dependencies with
+# rustc, so the lints cost their passes over our crates only. A separate `cargo clippy`
+# re-checked all ~830 dependencies (check metadata is not the build's): 537 s beside the tests
+# and 188 s after them on a CI machine (docs/benchmarks.md). The tests and the wheel below reuse this build,
+# as they inherit the same wrapper; a plain `cargo build` (the README's demo) compiles our crates
+# once more into artifacts of its own, and the dependencies not again.
+RUSTC_WORKSPACE_WRAPPER=$(rustup which clippy-driver 2>/dev/null || command -v clippy-driver) || {
+  echo "clippy-driver not found: the tests lint with clippy (rustup component add clippy)"
+  exit 1
+}
+export RUSTC_WORKSPACE_WRAPPER
+# cargo-clippy's encoding of `-- -D warnings`: each argument followed by the separator.
+export CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
+# One build for everything. The `tests` crate lists every dev-dependency as a normal one, so
+# building tests adds no features to a shared crate and nothing compiles twice.
 cargo build --release --workspace --all-targets --locked --timings
-step "cargo build --release"
+step "cargo build --release (clippy)"
 # Where the build went (the slowest units, our test executables' share): the report is
 # target/cargo-timings/cargo-timing.html.
 python3 scripts/timings.py target/cargo-timings/cargo-timing.html 15 || true
@@ -82,9 +94,9 @@ step "waiting for the venvs"
 bash scripts/build-python.sh   # the scaledp_data wheel, reusing that build
 step "scaledp_data wheel"
 
-# The tests wait on child processes and sockets much of the time (a fresh clone's ran at 1.4 of
-# the 2 cores): clippy and cargo-machete's install use what they leave, niced so that the
-# rate-bound tests keep their cores. cargo-machete builds in its own target dir.
+# cargo-machete's install uses what the tests leave (they wait on child processes and sockets
+# much of the time: a fresh clone's ran at 1.4 of the 2 cores), niced so that the rate-bound
+# tests keep their cores. It builds in its own target dir.
 nice -n 19 bash scripts/check-deps.sh --install-only > target/check-deps.log 2>&1 &
 machete_pid=$!
 # The Python processes the tests start (simulators, LeRobot, torch) cache their bytecode in
@@ -93,37 +105,9 @@ machete_pid=$!
 unset PYTHONDONTWRITEBYTECODE
 export PYTHONPYCACHEPREFIX="$PWD/target/pycache"
 # --no-fail-fast: every test executable runs, so one failure does not hide the others'.
-test_log=target/cargo-test.stderr
-cargo test --release --workspace --locked --no-fail-fast 2> >(tee "$test_log" >&2) &
-test_pid=$!
-# Clippy needs the build directory's lock, which `cargo test` holds until its executables are
-# built and released before it runs the first: start clippy then (check mode in the release
-# profile, so build scripts and proc-macros are the ones already built; dependencies are
-# re-checked, as check metadata is not the build's: ~2.5 min of CPU).
-for _ in $(seq 1200); do
-  grep -q '^ *Running ' "$test_log" 2>/dev/null && break
-  kill -0 "$test_pid" 2>/dev/null || break
-  sleep 0.5
-done
-clippy_log=target/clippy.log
-clippy_start=$(date +%s)
-( rc=0
-  nice -n 19 cargo clippy --release --workspace --all-targets --locked -- -D warnings || rc=$?
-  echo "clippy done after $(( $(date +%s) - clippy_start )) s"
-  exit "$rc" ) > "$clippy_log" 2>&1 &
-clippy_pid=$!
 test_rc=0
-wait "$test_pid" || test_rc=$?
+cargo test --release --workspace --locked --no-fail-fast || test_rc=$?
 step "cargo test"
-clippy_rc=0
-wait "$clippy_pid" || clippy_rc=$?
-step "cargo clippy -D warnings (rest)"
-steps+=("$(printf '%-28s %4s s' "  (clippy, from the tests)" "$(sed -n 's/^clippy done after \([0-9]*\) s$/\1/p' "$clippy_log")")")
-if [ "$clippy_rc" -ne 0 ]; then
-  echo "cargo clippy -D warnings failed (its log, $clippy_log):"
-  cat "$clippy_log"
-  exit 1
-fi
 [ "$test_rc" -eq 0 ] || { echo "cargo test failed (exit $test_rc): the failures are listed above"; exit "$test_rc"; }
 
 wait "$machete_pid" || { cat target/check-deps.log; exit 1; }
