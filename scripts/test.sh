@@ -68,11 +68,11 @@ step "cargo fmt --check"
 
 # Clippy runs inside the build: cargo compiles the workspace's own crates with clippy-driver
 # (rustc with clippy's lints; the wrapper `cargo clippy` itself sets) and the dependencies with
-# rustc, so the lints cost their passes over our crates only. A separate `cargo clippy`
-# re-checked all ~830 dependencies (check metadata is not the build's): 537 s beside the tests
-# and 188 s after them on a CI machine (docs/benchmarks.md). The tests and the wheel below reuse this build,
-# as they inherit the same wrapper; a plain `cargo build` (the README's demo) compiles our crates
-# once more into artifacts of its own, and the dependencies not again.
+# rustc, so the lints cost their passes over our crates only (23 s of wall). A separate `cargo
+# clippy` re-checked all ~830 dependencies (check metadata is not the build's): 537 s beside
+# the tests and 188 s after them on a CI machine (docs/benchmarks.md). The tests and the wheel
+# below reuse this build, as they inherit the same wrapper; a plain `cargo build` (the README's
+# demo) compiles our crates once more into artifacts of its own, the dependencies not again.
 RUSTC_WORKSPACE_WRAPPER=$(rustup which clippy-driver 2>/dev/null || command -v clippy-driver) || {
   echo "clippy-driver not found: the tests lint with clippy (rustup component add clippy)"
   exit 1
