@@ -80,6 +80,13 @@ RUSTC_WORKSPACE_WRAPPER=$(rustup which clippy-driver 2>/dev/null || command -v c
 export RUSTC_WORKSPACE_WRAPPER
 # cargo-clippy's encoding of `-- -D warnings`: each argument followed by the separator.
 export CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
+# scaledp-experiment records the commit it was built from (git-version's `git describe --dirty`,
+# rebuilt when .git/index moves). On a fresh clone the index's entries are racily clean (written
+# in the same second as the files), so that describe rewrote the index in the middle of the
+# build, and `cargo test` then compiled scaledp-experiment and the CLI again (~1 min). Refreshed
+# here, at least a second after the checkout, the index stays as it is.
+sleep 1
+git update-index -q --refresh 2>/dev/null || true
 # One build for everything. The `tests` crate lists every dev-dependency as a normal one, so
 # building tests adds no features to a shared crate and nothing compiles twice.
 cargo build --release --workspace --all-targets --locked --timings
