@@ -35,8 +35,10 @@
 //!   Linear(64 → 64). Per observation step the camera features then the normalized state; the
 //!   condition is that flattened over To.
 //! - Denoiser: `x_embedder` + `pos_embed` over the C action tokens; `c = t_emb + cond_emb`;
-//!   N blocks of adaLN-Zero modulated LayerNorm (no affine, eps 1e-6) → non-causal multi-head
-//!   attention (fused `qkv`) and tanh-GELU MLP with gated residuals; `final_layer`.
+//!   N blocks of adaLN-Zero modulated LayerNorm (no affine, eps 1e-6) → multi-head attention
+//!   (fused `qkv`) and tanh-GELU MLP with gated residuals; `final_layer`. The paper's attention
+//!   is non-causal ([`ModelConfig`]'s default, and the `paper` preset's); a training run's
+//!   default is causal ([`default_attention`] says why).
 //! - Sizes [`ModelSize`]: ti 8/256/4, s 12/384/6, b 12/768/12, l 24/1024/16, h 32/1280/16.
 //!   [`model::ScaleDp::count`] gives the parameter counts from shapes alone.
 //!
@@ -105,6 +107,6 @@ pub use model::cpu::init_threads;
 pub use predict::{predict_episode, EpisodePrediction};
 pub use scheduler::NoiseScheduler;
 pub use trainer::{
-    cosine_lr, AdamWConfig, EmaConfig, Event, LossSpec, Phases, StateNorm, StepRecord, Summary,
-    TrainOptions, Trainer, ValRecord, PRESETS,
+    cosine_lr, default_attention, AdamWConfig, EmaConfig, Event, LossSpec, Phases, StateNorm,
+    StepRecord, Summary, TrainOptions, Trainer, ValRecord, PRESETS,
 };

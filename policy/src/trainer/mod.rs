@@ -33,7 +33,7 @@ use crate::scheduler::NoiseScheduler;
 pub(crate) use loss::{candle_loss_and_grads, loss_and_grads};
 use optim::AdamW;
 pub use optim::{AdamWConfig, EmaConfig};
-pub use options::{cosine_lr, StateNorm, TrainOptions};
+pub use options::{cosine_lr, default_attention, StateNorm, TrainOptions};
 pub use presets::PRESETS;
 pub use spec::{LossSpec, Phases};
 pub use validate::ValRecord;

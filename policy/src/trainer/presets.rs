@@ -1,10 +1,19 @@
 //! Named training recipes: settings a user picks by name (`scaledp train --preset NAME`) and
-//! overrides flag by flag. The paper's model stays the default; a preset says what it changes.
+//! overrides flag by flag. Each says what it changes against the defaults, which are the
+//! paper's except ScaleDP's causal attention; `paper` is the paper's configuration whole.
 
+use crate::config::Attention;
 use crate::trainer::options::TrainOptions;
 
 /// The presets' names.
-pub const PRESETS: [&str; 3] = ["cpu-sim", "cpu-metaworld", "cpu-aloha"];
+pub const PRESETS: [&str; 4] = ["paper", "cpu-sim", "cpu-metaworld", "cpu-aloha"];
+
+/// The paper's ScaleDP: the defaults with its non-causal attention over the action chunk, which
+/// was the default until 2026-12-07 (see [`crate::default_attention`] for why it no longer is).
+/// On a CPU recipe the same is one flag: `--preset cpu-aloha --attention non-causal`.
+fn paper(o: TrainOptions) -> TrainOptions {
+    o.attention(Attention::NonCausal)
+}
 
 /// The recipe that trains ScaleDP-Ti on the simulated cube task within three hours on two CPU
 /// cores (see the README's "whole cycle"): what it changes against the paper's defaults, and
@@ -61,6 +70,7 @@ impl TrainOptions {
     /// unknown name.
     pub fn preset(name: &str) -> Option<TrainOptions> {
         match name {
+            "paper" => Some(paper(TrainOptions::default())),
             "cpu-sim" => Some(cpu_sim(TrainOptions::default())),
             "cpu-metaworld" => Some(cpu_metaworld(TrainOptions::default())),
             "cpu-aloha" => Some(cpu_aloha(TrainOptions::default())),

@@ -153,9 +153,17 @@ fn the_defaults_and_the_presets_are_the_rust_trainers() {
         for k in keys(&py_preset) {
             assert_eq!(py_preset[&k], preset[&k], "{name}'s {k}");
         }
-        assert_eq!(py_preset["resnet_width"], 32, "{name}");
+        if name != "paper" {
+            assert_eq!(py_preset["resnet_width"], 32, "{name}");
+        }
         assert_eq!(py_preset["lr"], 1e-3, "{name}");
     }
+    // ScaleDP trains causal unless the paper's configuration is asked for, in both trainers.
+    assert_eq!(py_def["attention"], "causal");
+    let paper = |flags: &[&str]| python_options(&[&["ds", "--preset", "paper"], flags].concat());
+    assert_eq!(paper(&[])["attention"], "non_causal");
+    assert_eq!(paper(&["--model", "s"])["attention"], "non_causal");
+    assert_eq!(paper(&["--model", "dp-t"])["attention"], "causal");
     let fixed = rust(TrainOptions::default().pos_embed(scaledp_policy::PosEmbed::SinCos));
     let py_fixed = python_options(&["ds", "--pos-embed", "sin-cos"]);
     assert_eq!(py_fixed["pos_embed"], "sin_cos");

@@ -24,6 +24,7 @@ DPT_DROPOUT = 0.3
 
 #: ``TrainOptions::preset`` (policy/src/trainer/presets.rs): what each named recipe changes.
 PRESETS: Dict[str, Dict[str, Any]] = {
+    "paper": {"attention": "non_causal"},
     "cpu-sim": {"resnet_width": 32, "noise_samples": 2, "batch_size": 64, "lr": 3e-4,
                 "warmup_steps": 500, "steps": 3000, "checkpoint_every": 500, "val_ratio": 0.0,
                 "val_every": 0},
@@ -37,7 +38,9 @@ PRESETS: Dict[str, Dict[str, Any]] = {
 
 
 def default_options() -> Dict[str, Any]:
-    """``TrainOptions::default()``: every default is the paper's / diffusion_policy's."""
+    """``TrainOptions::default()``: every default is the paper's / diffusion_policy's, except
+    ScaleDP's attention: causal (``default_attention`` in policy/src/trainer/options.rs says why;
+    the paper's non-causal is the ``paper`` preset)."""
     return {
         "size": "ti", "denoiser": None, "resnet_width": 64, "steps": 10_000, "batch_size": 64,
         "micro_batch": None, "lr": 1e-4, "warmup_steps": 500,
@@ -49,7 +52,7 @@ def default_options() -> Dict[str, Any]:
         "val_ratio": 0.05, "val_batches": 4, "obs_horizon": 2, "action_chunk": 16,
         "cameras": None, "image_size": None, "crop": 0.9, "loader_threads": 0,
         "max_episodes": None, "loss": {"noise_samples": 1, "mask_padding": False},
-        "state_norm": "min_max", "image_range": "symmetric", "attention": "non_causal",
+        "state_norm": "min_max", "image_range": "symmetric", "attention": "causal",
         "arch": "scale_dp", "dropout": None, "pos_embed": "learned",
     }
 
@@ -76,7 +79,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(not needed with --resume)")
     p.add_argument("--preset", choices=sorted(PRESETS), help="a named recipe to start from "
                    "(cpu-sim: ScaleDP-Ti on the simulated cube task within three hours on two "
-                   "CPU cores); the other flags override it one by one")
+                   "CPU cores; paper: the paper's ScaleDP, non-causal); the other flags override "
+                   "it one by one")
     p.add_argument("--model", default="ti", help="model: a ScaleDP size (ti, s, b, l or h) or "
                    "dp-t (the paper's baseline, diffusion_policy's transformer)")
     p.add_argument("--layers", type=int, help="denoiser depth instead of the model's [ScaleDP: "
@@ -119,8 +123,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "first stage (64: the paper's encoder) [64]")
     p.add_argument("--noise-samples", type=int, help="(timestep, noise) draws per "
                    "encoded observation [1]")
-    p.add_argument("--attention", help="non-causal or causal [ScaleDP: non-causal; DP-T: "
-                   "causal, its masks]")
+    p.add_argument("--attention", help="non-causal (the paper's ScaleDP) or causal [causal; "
+                   "DP-T: its own masks]")
     p.add_argument("--pos-embed", help="ScaleDP's positional embedding: learned (the paper's) "
                    "or sin-cos (DiT's fixed table, not trained) [learned]")
     p.add_argument("--mask-padding", action="store_true", help="leave action steps past an "
@@ -175,10 +179,14 @@ def options_from_args(a: argparse.Namespace) -> Dict[str, Any]:
             raise ValueError(f"--preset {preset}: one of {', '.join(sorted(PRESETS))}")
         o.update({k: v for k, v in PRESETS[preset].items() if k != "noise_samples"})
         o["loss"] = dict(o["loss"], noise_samples=PRESETS[preset].get("noise_samples", 1))
-    attention = a.attention if a.attention is not None else ("causal" if dpt else "non-causal")
+    # Naming another architecture than the preset's sets its default attention (causal for
+    # both); the same architecture keeps the preset's (``paper``: non-causal).
+    arch = "dp_t" if dpt else "scale_dp"
+    attention = a.attention if a.attention is not None else (
+        "causal" if arch != o["arch"] else o["attention"])
     o.update({"size": "ti" if dpt else model, "seed": a.seed, "crop": a.crop,
               "attention": _attention(attention), "state_norm": state_norm,
-              "arch": "dp_t" if dpt else "scale_dp"})
+              "arch": arch})
     if getattr(a, "pos_embed", None) is not None:
         o["pos_embed"] = _pos_embed(a.pos_embed)
     for key in ("obs_horizon", "action_chunk"):
