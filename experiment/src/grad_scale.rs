@@ -22,7 +22,7 @@ use candle_core::Device;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::prelude::*;
-use scaledp_policy::{Architecture, TrainOptions, Trainer, DPT_DIMS};
+use scaledp_policy::{Architecture, Attention, TrainOptions, Trainer, DPT_DIMS};
 use serde::{Deserialize, Serialize};
 
 use crate::provenance::Provenance;
@@ -134,10 +134,17 @@ pub fn run(a: &GradScaleArgs, stop: &Arc<AtomicBool>) -> Result<()> {
             if path.exists() {
                 continue;
             }
-            // The cube recipe's encoders and loss, a short cosine schedule, every model alike.
+            // The cube recipe's encoders and loss, a short cosine schedule, every model alike;
+            // each architecture with the paper's attention (ScaleDP non-causal, DP-T its masks),
+            // not `scaledp train`'s causal default.
+            let attention = match arch {
+                Architecture::ScaleDp => Attention::NonCausal,
+                Architecture::DpT => Attention::Causal,
+            };
             let opts = TrainOptions::preset("cpu-sim")
                 .context("the cpu-sim preset")?
                 .arch(arch)
+                .attention(attention)
                 .denoiser(depth, width, heads)
                 .steps(a.steps)
                 .warmup_steps(a.steps / 6)
