@@ -244,6 +244,11 @@ pub struct BenchTrainArgs {
     /// Models timed, comma-separated: ti (ScaleDP-Ti), dp-t (the paper's baseline).
     #[arg(long, value_delimiter = ',', default_value = "ti,dp-t")]
     pub models: Vec<String>,
+    /// ScaleDP-Ti's attention over the action chunk, as `scaledp train --attention`: causal
+    /// or non-causal (the paper's) [the preset's: causal, `paper`'s non-causal]. DP-T keeps
+    /// its own masks.
+    #[arg(long)]
+    pub attention: Option<String>,
     /// Forward/backward at most this many samples at a time.
     #[arg(long)]
     pub micro_batch: Option<usize>,

@@ -46,13 +46,7 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
             other => bail!("--models {other}: ti or dp-t"),
         })
         .collect::<Result<Vec<_>>>()?;
-    let tmp = tempfile::tempdir().context("creating a temporary directory")?;
-    let work = args.out.clone().unwrap_or_else(|| tmp.path().to_path_buf());
-    let size = args.image_size.as_deref().map(parse_size).transpose()?;
-    let dataset = make_dataset(&work, &args, size)?;
-    let ds = dataset.to_string_lossy().to_string();
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let base = match &args.preset {
+    let mut base = match &args.preset {
         Some(p) => TrainOptions::preset(p).with_context(|| {
             format!(
                 "--preset {p}: one of {}",
@@ -61,6 +55,16 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         })?,
         None => TrainOptions::default(),
     };
+    // ScaleDP's attention; `model_round`'s switch to DP-T resets it to DP-T's own masks.
+    if let Some(at) = &args.attention {
+        base = base.attention(at.parse().context("--attention")?);
+    }
+    let size = args.image_size.as_deref().map(parse_size).transpose()?;
+    let tmp = tempfile::tempdir().context("creating a temporary directory")?;
+    let work = args.out.clone().unwrap_or_else(|| tmp.path().to_path_buf());
+    let dataset = make_dataset(&work, &args, size)?;
+    let ds = dataset.to_string_lossy().to_string();
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let peak = matmul_peak_gflops(1024, 5);
     println!(
         "this machine's FP32 matrix-multiply peak: {peak:.1} GFLOP/s on {threads} threads (the best of 6 products of two 1024×1024 matrices by the engine's GEMM)"
@@ -146,8 +150,8 @@ fn model_round(
     let (cw, ch) = cfg.crop_size();
     let flops = step_flops(&cfg, batch, k);
     println!(
-        "\n{}, {} cameras {}x{} cropped to {cw}x{ch}, ResNet width {}, state {}, action {}, To {}, C {}, batch {batch}, {k} noise draw(s) per observation, {threads} threads; a step is {:.1} GFLOP ({:.1} encoders, {:.1} denoiser; counted from the layer shapes)",
-        cfg.denoiser_name(), cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.resnet_width, cfg.state_dim, cfg.action_dim,
+        "\n{}, {} attention, {} cameras {}x{} cropped to {cw}x{ch}, ResNet width {}, state {}, action {}, To {}, C {}, batch {batch}, {k} noise draw(s) per observation, {threads} threads; a step is {:.1} GFLOP ({:.1} encoders, {:.1} denoiser; counted from the layer shapes)",
+        cfg.denoiser_name(), cfg.attention, cfg.cameras.len(), cfg.image_width, cfg.image_height, cfg.resnet_width, cfg.state_dim, cfg.action_dim,
         cfg.obs_horizon, cfg.action_chunk, flops.total() / 1e9, flops.encoders / 1e9, flops.denoiser / 1e9
     );
     let share = |step_s: f64| flops.total() / step_s.max(1e-9) / 1e9 / peak.max(1e-9);
