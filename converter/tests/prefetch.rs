@@ -16,17 +16,6 @@ use scaledp_schema::{Rig, RosMessage};
 
 const T0: u64 = 1_700_000_000_000_000_000;
 
-/// `rig` without what it records beside colour and joints (depth, camera_info, tf): these
-/// recordings hold colour and joints only.
-fn colour_only(mut rig: Rig) -> Rig {
-    for c in &mut rig.cameras {
-        c.depth = None;
-        c.camera_info_topic = None;
-    }
-    rig.tf = None;
-    rig
-}
-
 /// 2.5 s of the built-in Franka rig: two 640×480 bgra8 cameras at ~30 Hz with jittered stamps
 /// (one camera drops a few frames), arm and gripper joint states at 200 Hz; LZ4 chunks of 2 MiB,
 /// so most chunks end with a frame. The rig is stored as the recorder stores it.
@@ -191,7 +180,7 @@ fn same(a: &Episode, b: &Episode) {
 fn frames_picked_during_the_read_equal_frames_read_again() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("episode.mcap");
-    let rig = colour_only(Rig::builtin("franka_2zed").unwrap());
+    let rig = Rig::builtin("franka_2zed").unwrap().training_streams();
     record(&path, &rig);
     let unrigged = ConvertOptions::default()
         .size(160, 120)
@@ -323,7 +312,7 @@ fn frames_read_again_are_counted_like_the_first_read() {
 #[test]
 fn a_recording_at_another_field_of_view_does_not_join_the_dataset() {
     let dir = tempfile::tempdir().unwrap();
-    let rig = colour_only(Rig::builtin("franka_2zed").unwrap());
+    let rig = Rig::builtin("franka_2zed").unwrap().training_streams();
     let mut zoomed = rig.clone();
     zoomed.cameras[0].vertical_fov_deg = Some(45.0);
     let (a, b) = (dir.path().join("a.mcap"), dir.path().join("b.mcap"));

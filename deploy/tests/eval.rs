@@ -120,11 +120,9 @@ fn a_recorded_rollout_converts_into_an_episode_whose_actions_are_the_commands() 
 
 #[test]
 fn the_bimanual_cell_is_driven_through_the_14_d_action_path() {
-    let mut rig = scaledp_schema::Rig::builtin("bimanual_ur5_sim").unwrap();
-    for c in &mut rig.cameras {
-        c.width = 64;
-        c.height = 48;
-    }
+    let rig = scaledp_schema::Rig::builtin("bimanual_ur5_sim")
+        .unwrap()
+        .with_image_size(64, 48);
     let dir = tempfile::tempdir().unwrap();
     let spec = common::Spec::at_home(&rig);
     assert_eq!(spec.dim, 14);

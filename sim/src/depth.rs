@@ -135,11 +135,7 @@ mod tests {
 
     #[test]
     fn depth_is_the_table_where_the_camera_sees_it_and_k_projects_like_the_renderer() {
-        let mut rig = Rig::builtin("franka_2zed").unwrap();
-        for c in &mut rig.cameras {
-            c.width = 64;
-            c.height = 48;
-        }
+        let rig = Rig::builtin("franka_2zed").unwrap().with_image_size(64, 48);
         let scene = std::sync::Arc::new(Scene::new(&rig));
         let state = World::with_scene(scene.clone(), 0).state();
         let cam = &rig.cameras[0];

@@ -32,12 +32,7 @@ fn endpoint() -> String {
 }
 
 fn small(name: &str) -> Rig {
-    let mut rig = Rig::builtin(name).unwrap();
-    for c in &mut rig.cameras {
-        c.width = 32;
-        c.height = 24;
-    }
-    rig
+    Rig::builtin(name).unwrap().with_image_size(32, 24)
 }
 
 /// Polls `done` every 10 ms for at most `seconds`.
@@ -93,11 +88,7 @@ fn first_messages(rig: &Rig, seed: u64) -> BTreeMap<String, Vec<Vec<u8>>> {
 #[test]
 fn a_seed_fixes_the_live_streams_and_another_seed_changes_them() {
     // Nobody commands the arms, so the world holds still and every byte follows from the seed.
-    let mut rig = small("franka_2zed");
-    for c in &mut rig.cameras {
-        c.width = 32;
-        c.height = 24;
-    }
+    let rig = small("franka_2zed");
     let a = first_messages(&rig, 3);
     assert_eq!(a, first_messages(&rig, 3), "same seed, same messages");
     let other = first_messages(&rig, 4);

@@ -20,12 +20,7 @@ use scaledp_schema::{Rig, RosMessage};
 use scaledp_sim::SimOptions;
 
 fn small(name: &str, w: u32, h: u32) -> Rig {
-    let mut rig = Rig::builtin(name).unwrap();
-    for c in &mut rig.cameras {
-        c.width = w;
-        c.height = h;
-    }
-    rig
+    Rig::builtin(name).unwrap().with_image_size(w, h)
 }
 
 /// Per topic: (schema name, payloads) of an MCAP file.

@@ -28,16 +28,13 @@ pub const SIDE: &str = "/side_cam/image";
 /// debug build on a busy machine), and a third camera `side` on [`SIDE`]: (the recorder's rig,
 /// the simulator's, without `side`).
 pub fn rigs() -> (Rig, Rig) {
-    let mut rig = Rig::builtin("franka_2zed").unwrap();
+    let mut rig = Rig::builtin("franka_2zed")
+        .unwrap()
+        .with_image_size(64, 48)
+        .training_streams();
     for c in &mut rig.cameras {
-        c.width = 64;
-        c.height = 48;
         c.fps = 15.0;
-        c.depth = None;
-        c.camera_info_topic = None;
     }
-    rig.tf = None;
-    rig.extra_topics.clear();
     rig.arms[0].rate_hz = 100.0;
     let sim = rig.clone();
     let mut side = rig.cameras[1].clone();

@@ -53,33 +53,19 @@ pub fn synth_episode(path: &Path, rig: &scaledp_schema::Rig, seed: u64, seconds:
 /// training streams (colour, joints, gripper: what the tests that compare every message with
 /// what was published expect); [`full_rig`] keeps depth, `camera_info` and tf.
 pub fn small_franka() -> scaledp_schema::Rig {
-    training_streams(full_rig("franka_2zed", 64, 48))
+    full_rig("franka_2zed", 64, 48).training_streams()
 }
 
 /// The bimanual UR5 rig (rgb8 RealSense) with 32×24 images, training streams only.
 pub fn small_bimanual() -> scaledp_schema::Rig {
-    training_streams(full_rig("bimanual_ur5_3rs", 32, 24))
+    full_rig("bimanual_ur5_3rs", 32, 24).training_streams()
 }
 
 /// A shipped rig with every camera at `width` × `height`, everything it records kept.
 pub fn full_rig(name: &str, width: u32, height: u32) -> scaledp_schema::Rig {
-    let mut rig = scaledp_schema::Rig::builtin(name).expect("shipped rig");
-    for c in &mut rig.cameras {
-        c.width = width;
-        c.height = height;
-    }
-    rig
-}
-
-/// `rig` without what it records beside its training streams.
-pub fn training_streams(mut rig: scaledp_schema::Rig) -> scaledp_schema::Rig {
-    for c in &mut rig.cameras {
-        c.depth = None;
-        c.camera_info_topic = None;
-    }
-    rig.tf = None;
-    rig.extra_topics.clear();
-    rig
+    scaledp_schema::Rig::builtin(name)
+        .expect("shipped rig")
+        .with_image_size(width, height)
 }
 
 /// The record batches of a dataset's first data file.

@@ -15,11 +15,7 @@ use scaledp_sim::Scene;
 
 /// `franka_sim` made light for a 2-core machine: 80×45 cameras, a 250 Hz arm.
 pub fn light_rig() -> Rig {
-    let mut rig = Rig::builtin("franka_sim").unwrap();
-    for c in &mut rig.cameras {
-        c.width = 80;
-        c.height = 45;
-    }
+    let mut rig = Rig::builtin("franka_sim").unwrap().with_image_size(80, 45);
     rig.arms[0].rate_hz = 250.0;
     rig
 }

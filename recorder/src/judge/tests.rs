@@ -10,13 +10,9 @@ const T0: u64 = 1_700_000_000_000_000_000;
 
 /// franka_2zed with its training streams only (no depth, camera_info, tf).
 fn rig() -> Rig {
-    let mut rig = Rig::builtin("franka_2zed").expect("shipped rig");
-    for c in &mut rig.cameras {
-        c.depth = None;
-        c.camera_info_topic = None;
-    }
-    rig.tf = None;
-    rig
+    Rig::builtin("franka_2zed")
+        .expect("shipped rig")
+        .training_streams()
 }
 
 fn joints(names: &[String], stamp_ns: u64) -> Vec<u8> {

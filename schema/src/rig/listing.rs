@@ -1,9 +1,31 @@
-//! The topics a rig records, in the order training data is indexed by.
+//! The topics a rig records, in the order training data is indexed by, and the rig cut down to
+//! its training streams.
 
 use super::topics::*;
 use super::Rig;
 
 impl Rig {
+    /// This rig without what it records beside its training streams (each camera's depth and
+    /// `camera_info`, `/tf` and `/tf_static`, further topics): its [`Rig::topics`] are then
+    /// colour, joints, grippers and commands, the streams a dataset is made of.
+    pub fn training_streams(mut self) -> Rig {
+        for c in &mut self.cameras {
+            c.depth = None;
+            c.camera_info_topic = None;
+        }
+        self.tf = None;
+        self.extra_topics.clear();
+        self
+    }
+
+    /// This rig with every camera at `width` × `height`, its topics, encodings and rates kept.
+    pub fn with_image_size(mut self, width: u32, height: u32) -> Rig {
+        for c in &mut self.cameras {
+            (c.width, c.height) = (width, height);
+        }
+        self
+    }
+
     /// Every topic of the rig, in this order: cameras, then each arm's joint states and gripper
     /// states, then each arm's command topics (arm, then gripper), all as declared; then what
     /// is recorded beside them: per camera its depth and `camera_info` topics, `/tf` and

@@ -277,6 +277,14 @@ fn what_is_recorded_beside_the_training_streams() {
     );
     assert_eq!(topics[n].message_type, "sensor_msgs/msg/Image");
     assert!(topics[n].is_image);
+    // Cut to its training streams, the rig lists those and nothing beside them.
+    assert_eq!(rig.clone().training_streams().topics(), topics[..n]);
+    let small = rig.clone().with_image_size(32, 24);
+    assert!(small
+        .cameras
+        .iter()
+        .all(|c| (c.width, c.height) == (32, 24)));
+    assert_eq!(small.topics().len(), topics.len());
     assert_eq!(
         rig.cameras[0].depth.as_ref().map(|d| d.encoding),
         Some(DepthEncoding::U16Millimetres)

@@ -9,12 +9,9 @@ use crate::world::World;
 /// The Franka rig with 160×120 cameras: camera 0 ("front") is fixed in the world, camera 1
 /// ("wrist") rides on the flange.
 fn rig() -> Rig {
-    let mut rig = Rig::builtin("franka_2zed").unwrap();
-    for c in &mut rig.cameras {
-        c.width = 160;
-        c.height = 120;
-    }
-    rig
+    Rig::builtin("franka_2zed")
+        .unwrap()
+        .with_image_size(160, 120)
 }
 
 fn draw(scene: &Scene, view: &View, state: &WorldState) -> Vec<u8> {

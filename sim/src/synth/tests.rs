@@ -29,12 +29,7 @@ fn messages(bytes: &[u8]) -> Messages {
 }
 
 fn small(name: &str, w: u32, h: u32) -> Rig {
-    let mut rig = Rig::builtin(name).unwrap();
-    for c in &mut rig.cameras {
-        c.width = w;
-        c.height = h;
-    }
-    rig
+    Rig::builtin(name).unwrap().with_image_size(w, h)
 }
 
 #[test]

@@ -34,11 +34,9 @@ pub fn python() -> PathBuf {
 
 /// The light simulated Franka cell: 80×45 cameras (non-square crops: 72×41), a 250 Hz arm.
 pub fn light_rig() -> scaledp_schema::Rig {
-    let mut rig = scaledp_schema::Rig::builtin("franka_sim").unwrap();
-    for c in &mut rig.cameras {
-        c.width = 80;
-        c.height = 45;
-    }
+    let mut rig = scaledp_schema::Rig::builtin("franka_sim")
+        .unwrap()
+        .with_image_size(80, 45);
     rig.arms[0].rate_hz = 250.0;
     rig
 }

@@ -262,12 +262,10 @@ mod tests {
     /// `discarded/` and keeps one episode, within the retries allowed.
     #[test]
     fn an_episode_convert_would_reject_is_recorded_again_and_moved_aside() {
-        let mut rig = Rig::builtin("franka_2zed").unwrap();
-        for c in &mut rig.cameras {
-            (c.width, c.height, c.depth, c.camera_info_topic) = (32, 24, None, None);
-        }
-        rig.tf = None;
-        rig.extra_topics.clear();
+        let rig = Rig::builtin("franka_2zed")
+            .unwrap()
+            .with_image_size(32, 24)
+            .training_streams();
         let camera = rig.cameras[0].topic.trim_start_matches('/').to_string();
         let endpoint = format!("tcp/127.0.0.1:{}", crate::shared::free_port().unwrap());
         let sim_session =

@@ -19,12 +19,7 @@ const T0: u64 = 1_700_000_000_000_000_000;
 
 /// The Franka rig with its real topics, encodings and rates, but 64×48 images.
 fn small_franka() -> Rig {
-    let mut rig = Rig::builtin("franka_2zed").unwrap();
-    for c in &mut rig.cameras {
-        c.width = 64;
-        c.height = 48;
-    }
-    rig
+    Rig::builtin("franka_2zed").unwrap().with_image_size(64, 48)
 }
 
 fn synth(path: &Path, rig: &Rig, seed: u64, seconds: f64) {
