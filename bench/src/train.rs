@@ -91,6 +91,11 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
         cfg.state_dim,
         cfg.action_dim,
     );
+    // ScaleDP's latency rows use the attention its training rows use (the preset's, or
+    // `--attention`), even when `--models` leaves ScaleDP out; DP-T keeps its own masks.
+    let scaledp_attention = Trainer::plan(&ds, &base.arch(Architecture::ScaleDp))?
+        .model
+        .attention;
     let mut models = vec![
         ModelConfig::new(
             ModelSize::Ti,
@@ -106,10 +111,13 @@ pub fn run(args: BenchTrainArgs) -> Result<Outcome> {
     for c in &mut models {
         c.obs_horizon = cfg.obs_horizon;
         c.action_chunk = cfg.action_chunk;
+        if c.arch == Architecture::ScaleDp {
+            c.attention = scaledp_attention;
+        }
         let l = ddim_latency(c, 10, args.latency_runs, &Device::Cpu)?;
         println!(
-            "DDIM-10 {:<10} per action chunk (batch 1, {} runs): p50 {:.1} ms (encoders {:.1} ms), p99 {:.1} ms (goal < 100 ms)",
-            c.denoiser_name(), l.runs, l.p50_ms, l.encode_p50_ms, l.p99_ms
+            "DDIM-10 {:<10} {} attention, per action chunk (batch 1, {} runs): p50 {:.1} ms (encoders {:.1} ms), p99 {:.1} ms (goal < 100 ms)",
+            c.denoiser_name(), c.attention, l.runs, l.p50_ms, l.encode_p50_ms, l.p99_ms
         );
     }
     Ok(Outcome::Completed)
