@@ -53,6 +53,16 @@ impl Arm {
         }
     }
 
+    /// The arm other than the recipe's that a registered reading of `docs/experiments.md` holds
+    /// this one against (reading 2, the budget: `ti-causal-x3` against `ti-x3`); `None` for the
+    /// arms read against the recipe's only.
+    pub fn also_against(&self) -> Option<&'static str> {
+        match self.name {
+            "ti-causal-x3" => Some("ti-x3"),
+            _ => None,
+        }
+    }
+
     /// The recipe `base` with this arm's denoiser.
     pub fn options(&self, base: TrainOptions) -> TrainOptions {
         let steps = base.get_steps() * self.steps_factor;

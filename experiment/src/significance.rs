@@ -97,7 +97,7 @@ pub(crate) fn seed_suffix(seed: u64) -> String {
 }
 
 /// `0.009`, `< 0.001`.
-fn p_cell(p: Option<f64>) -> String {
+pub(crate) fn p_cell(p: Option<f64>) -> String {
     match p {
         None => "–".into(),
         Some(p) if p < 0.001 => "< 0.001".into(),

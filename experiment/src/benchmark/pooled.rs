@@ -5,12 +5,14 @@
 //! reads "on seed N"; significant with the seeds disagreeing, "the seeds disagree"; otherwise
 //! "no difference shown". The test and its reading use the training seeds both arms have, so
 //! an arm with one seed is held against the recipe's same seed, not the recipe's seeds pooled.
-//! The README's results summary is this table.
+//! An arm a registered reading also holds against another arm ([`crate::Arm::also_against`])
+//! gets a second table, read by the same rule, with the paired test on each shared seed.
+//! The README's results summary is these tables.
 
 use super::files::TaskResult;
 use super::replicates::replicates;
 use crate::figures::EvalFigures;
-use crate::significance::{fisher_two_sided, RECIPE};
+use crate::significance::{fisher_two_sided, mcnemar_exact, p_cell, RECIPE};
 
 /// Successes and episodes of `rs` together.
 fn pooled(rs: &[&TaskResult]) -> EvalFigures {
@@ -34,9 +36,10 @@ fn shared<'a>(rs: &[&'a TaskResult], other: &[&TaskResult]) -> Vec<&'a TaskResul
         .collect()
 }
 
-/// The reading of `arm` (its results `rs`) against the recipe's `base` on one task, both
-/// holding only the training seeds they share.
-fn reading(rs: &[&TaskResult], base: &[&TaskResult], p: Option<f64>) -> String {
+/// The reading of an arm (its results `rs`) against the arm `against` (its results `base`,
+/// the recipe's unless a registered reading names another) on one task, both holding only the
+/// training seeds they share.
+fn reading(rs: &[&TaskResult], base: &[&TaskResult], against: &str, p: Option<f64>) -> String {
     if !p.is_some_and(|p| p < 0.05) {
         return "no difference shown".into();
     }
@@ -56,10 +59,10 @@ fn reading(rs: &[&TaskResult], base: &[&TaskResult], p: Option<f64>) -> String {
         .all(|&(x, y)| if above { x >= y } else { x <= y });
     if common.len() < 2 {
         let seeds: Vec<String> = rs.iter().map(|r| r.train_seed.to_string()).collect();
-        format!("{word} `{RECIPE}`, on seed {} only", seeds.join(", "))
+        format!("{word} `{against}`, on seed {} only", seeds.join(", "))
     } else if agree {
         format!(
-            "**{word} `{RECIPE}`** (a finding: {} seeds agree)",
+            "**{word} `{against}`** (a finding: {} seeds agree)",
             common.len()
         )
     } else {
@@ -90,7 +93,7 @@ pub(super) fn table(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> 
                 (None, format!("no training seed in common with `{RECIPE}`"))
             } else {
                 let p = fisher_two_sided(&pooled(&mine), &pooled(&theirs));
-                (p, reading(&mine, &theirs, p))
+                (p, reading(&mine, &theirs, RECIPE, p))
             };
             rows.push_str(&format!(
                 "| {task} | `{arm}` | {} | {}/{} ({:.0} %, {:.0}–{:.0} %) | {} | {read} |\n",
@@ -114,6 +117,68 @@ pub(super) fn table(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> 
     format!(
         "| task | arm | per training seed (0, 1, …) | pooled (95 % Wilson) | Fisher p against `{RECIPE}`, the seeds both have pooled | reading |\n\
          |---|---|---|---|---|---|\n{rows}"
+    )
+}
+
+/// Successes per training seed: `49/50, 47/50`.
+fn per_seed(rs: &[&TaskResult]) -> String {
+    rs.iter()
+        .map(|r| format!("{}/{}", r.test.successes, r.test.episodes))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The table of the arms (of `arms`) that a registered reading holds against an arm other
+/// than the recipe's, on the training seeds both have; empty when no such pair has landed.
+pub(super) fn against_others(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> String {
+    let mut rows = String::new();
+    for task in tasks {
+        for arm in arms {
+            let Some(against) = crate::arms::arm(arm).and_then(|a| a.also_against()) else {
+                continue;
+            };
+            let (rs, base) = (
+                replicates(results, task, arm),
+                replicates(results, task, against),
+            );
+            let (mine, theirs) = (shared(&rs, &base), shared(&base, &rs));
+            if mine.is_empty() {
+                continue;
+            }
+            let p = fisher_two_sided(&pooled(&mine), &pooled(&theirs));
+            let paired: Vec<String> = mine
+                .iter()
+                .filter_map(|r| {
+                    let o = theirs.iter().find(|o| o.train_seed == r.train_seed)?;
+                    let (only_arm, only_other, p) = mcnemar_exact(&r.test, &o.test)?;
+                    Some(format!(
+                        "seed {}: {only_other} / {only_arm} ({})",
+                        r.train_seed,
+                        p_cell(Some(p))
+                    ))
+                })
+                .collect();
+            let (a, b) = (pooled(&mine), pooled(&theirs));
+            rows.push_str(&format!(
+                "| {task} | `{arm}` | `{against}` | {} | {} | {}/{} against {}/{} | {} | {} | {} |\n",
+                per_seed(&mine),
+                per_seed(&theirs),
+                a.successes,
+                a.episodes,
+                b.successes,
+                b.episodes,
+                p_cell(p),
+                if paired.is_empty() { "–".to_string() } else { paired.join("; ") },
+                reading(&mine, &theirs, against, p),
+            ));
+        }
+    }
+    if rows.is_empty() {
+        return String::new();
+    }
+    format!(
+        "| task | arm | against | arm, per training seed | against, per training seed | pooled | Fisher p | paired per seed: only `against` / only the arm (McNemar p) | reading |\n\
+         |---|---|---|---|---|---|---|---|---|\n{rows}"
     )
 }
 
@@ -162,6 +227,43 @@ mod tests {
         ];
         let md = table(&tasks, &arms, &split);
         assert!(md.contains("the seeds disagree"), "{md}");
+    }
+
+    #[test]
+    fn a_registered_second_reference_is_read_by_the_same_rule() {
+        let tasks = vec!["transfer-cube".to_string()];
+        let arms = ["ti", "ti-x3", "ti-causal-x3"];
+        // One seed each: 45/50 against 49/50, paired 4 / 0 (the fixtures pass their first seeds).
+        let one = vec![
+            result("ti", 0, 20),
+            result("ti-x3", 0, 49),
+            result("ti-causal-x3", 0, 45),
+        ];
+        let md = against_others(&tasks, &arms, &one);
+        assert!(
+            md.contains("| transfer-cube | `ti-causal-x3` | `ti-x3` | 45/50 | 49/50 | 45/50 against 49/50 | 0.204 | seed 0: 4 / 0 (0.125) | no difference shown |"),
+            "{md}"
+        );
+        // Two agreeing seeds, far apart: a finding, worded against `ti-x3`, not `ti`.
+        let two = vec![
+            result("ti-x3", 0, 20),
+            result("ti-x3", 1, 25),
+            result("ti-causal-x3", 0, 49),
+            result("ti-causal-x3", 1, 48),
+            result("ti-causal-x3", 2, 48),
+        ];
+        let md = against_others(&tasks, &arms, &two);
+        assert!(
+            md.contains("| 49/50, 48/50 | 20/50, 25/50 | 97/100 against 45/100 |"),
+            "{md}"
+        );
+        assert!(
+            md.contains("seed 0: 0 / 29 (< 0.001); seed 1: 0 / 23 (< 0.001) | **above `ti-x3`** (a finding: 2 seeds agree) |"),
+            "{md}"
+        );
+        // Nothing to hold it against yet, and arms without a second reference: no table.
+        assert!(against_others(&tasks, &arms, &[result("ti-causal-x3", 0, 45)]).is_empty());
+        assert!(against_others(&tasks, &["ti", "ti-x3"], &two).is_empty());
     }
 
     /// Held against the recipe's same seed: 30/50 is not above `ti` seed 0's 20/50 (p = 0.06),
