@@ -81,10 +81,6 @@ pub(super) fn table(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> 
             if rs.is_empty() {
                 continue;
             }
-            let seeds: Vec<String> = rs
-                .iter()
-                .map(|r| format!("{}/{}", r.test.successes, r.test.episodes))
-                .collect();
             let all = pooled(&rs);
             let (mine, theirs) = (shared(&rs, &base), shared(&base, &rs));
             let (p, read) = if *arm == RECIPE || base.is_empty() {
@@ -97,17 +93,13 @@ pub(super) fn table(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> 
             };
             rows.push_str(&format!(
                 "| {task} | `{arm}` | {} | {}/{} ({:.0} %, {:.0}–{:.0} %) | {} | {read} |\n",
-                seeds.join(", "),
+                per_seed(&rs),
                 all.successes,
                 all.episodes,
                 100.0 * all.success_rate,
                 100.0 * all.wilson_low,
                 100.0 * all.wilson_high,
-                p.map_or("–".into(), |p| if p < 0.001 {
-                    "< 0.001".to_string()
-                } else {
-                    format!("{p:.3}")
-                }),
+                p_cell(p),
             ));
         }
     }
@@ -128,8 +120,9 @@ fn per_seed(rs: &[&TaskResult]) -> String {
         .join(", ")
 }
 
-/// The table of the arms (of `arms`) that a registered reading holds against an arm other
-/// than the recipe's, on the training seeds both have; empty when no such pair has landed.
+/// The section (its lead and table) of the arms (of `arms`) that a registered reading holds
+/// against an arm other than the recipe's, on the training seeds both have; empty when no such
+/// pair has landed.
 pub(super) fn against_others(tasks: &[String], arms: &[&str], results: &[TaskResult]) -> String {
     let mut rows = String::new();
     for task in tasks {
@@ -177,7 +170,10 @@ pub(super) fn against_others(tasks: &[String], arms: &[&str], results: &[TaskRes
         return String::new();
     }
     format!(
-        "| task | arm | against | arm, per training seed | against, per training seed | pooled | Fisher p | paired per seed: only `against` / only the arm (McNemar p) | reading |\n\
+        "\nArms a registered reading of `docs/experiments.md` also holds against another arm \
+         (reading 2, the budget: `ti-causal-x3` against `ti-x3`), by the same rule, on the \
+         training seeds both have:\n\n\
+         | task | arm | against | arm, per training seed | against, per training seed | pooled | Fisher p | paired per seed: only `against` / only the arm (McNemar p) | reading |\n\
          |---|---|---|---|---|---|---|---|---|\n{rows}"
     )
 }

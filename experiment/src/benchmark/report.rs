@@ -85,11 +85,6 @@ fn controls_arms(controls: &BTreeMap<String, TaskControls>) -> String {
 }
 
 /// Rebuilds `table.md` and `success_by_level.svg` in `dir`.
-/// The lead of the table of arms held against an arm other than the recipe's.
-const AGAINST_OTHERS: &str = "Arms a registered reading of `docs/experiments.md` also holds \
-     against another arm (reading 2, the budget: `ti-causal-x3` against `ti-x3`), by the same \
-     rule, on the training seeds both have:";
-
 pub(crate) fn rebuild(dir: &Path) -> Result<()> {
     let l = load(dir)?;
     if l.results.is_empty() {
@@ -157,10 +152,7 @@ pub(crate) fn rebuild(dir: &Path) -> Result<()> {
              before the runs finished (a finding needs p < 0.05 pooled and every seed agreeing):\n\n{pooled}"
         ));
     }
-    let others = pooled::against_others(&task_names, &arms, &l.results);
-    if !others.is_empty() {
-        md.push_str(&format!("\n{AGAINST_OTHERS}\n\n{others}"));
-    }
+    md.push_str(&pooled::against_others(&task_names, &arms, &l.results));
     md.push_str(&stages_table(&tasks, &arms, &l));
     if let Some(cited) = super::kind::published(&l.results[0].benchmark) {
         md.push_str(cited);
@@ -346,10 +338,6 @@ fn summary(dir: &Path) -> Result<String> {
     tasks.sort();
     tasks.dedup();
     let names: Vec<String> = tasks.into_iter().map(|(_, t)| t).collect();
-    let mut md = pooled::table(&names, &arms, &l.results);
-    let others = pooled::against_others(&names, &arms, &l.results);
-    if !others.is_empty() {
-        md.push_str(&format!("\n{AGAINST_OTHERS}\n\n{others}"));
-    }
-    Ok(md)
+    Ok(pooled::table(&names, &arms, &l.results)
+        + &pooled::against_others(&names, &arms, &l.results))
 }
