@@ -115,9 +115,30 @@ unset PYTHONDONTWRITEBYTECODE
 export PYTHONPYCACHEPREFIX="$PWD/target/pycache"
 # --no-fail-fast: every test executable runs, so one failure does not hide the others'.
 test_rc=0
-cargo test --release --workspace --locked --no-fail-fast || test_rc=$?
+cargo test --release --workspace --locked --no-fail-fast 2>&1 | tee target/test.log ||
+  test_rc=${PIPESTATUS[0]}
 step "cargo test"
-[ "$test_rc" -eq 0 ] || { echo "cargo test failed (exit $test_rc): the failures are listed above"; exit "$test_rc"; }
+# A CI log keeps the start and the end of the output and cuts the middle, where cargo lists
+# why each test failed (stop 52's flake left only a name). So the first two failures' own
+# output, their backtraces left out, comes again last; target/test.log has everything.
+failed_output() {
+  awk '
+    /^---- .* (stdout|stderr) ----$/ {
+      n++; p = (n <= 2); lines = 0; skip = 0
+      if (!p) { print "(also failed: " $2 ")"; next }
+    }
+    /^failures:$/ { p = 0 }
+    /^stack backtrace:$/ { skip = 1; next }
+    /^note: Some details are omitted/ { skip = 0; next }
+    p && !skip && lines++ < 25 { print substr($0, 1, 400) }
+  ' "$1"
+}
+if [ "$test_rc" -ne 0 ]; then
+  echo "== the failed tests' own output (all of it: target/test.log) =="
+  failed_output target/test.log
+  echo "cargo test failed (exit $test_rc)"
+  exit "$test_rc"
+fi
 
 wait "$machete_pid" || { cat target/check-deps.log; exit 1; }
 env -u RUSTC_WORKSPACE_WRAPPER -u CLIPPY_ARGS bash scripts/check-deps.sh

@@ -236,13 +236,14 @@ pub fn run_scaledp(args: &[&str], cwd: &Path) -> std::process::Output {
 }
 
 /// The standard output of `out`, which must have succeeded (else the test fails with `what`,
-/// its standard output and its standard error).
+/// its exit status, its standard error (where the reason is) and then its standard output).
 pub fn cli_ok(out: &std::process::Output, what: &str) -> String {
     assert!(
         out.status.success(),
-        "{what}: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
+        "{what} ({}); its standard error:\n{}\nits standard output:\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
     );
     String::from_utf8_lossy(&out.stdout).to_string()
 }
