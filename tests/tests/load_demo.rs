@@ -81,6 +81,10 @@ fn demo_records_converts_and_loads_one_epoch() {
             "3",
             "--batch-size",
             "8",
+            // Two steps show the training and predict path as well as the README's thirty do
+            // (those took ~30 s of this test's 42).
+            "--train-steps",
+            "2",
         ])
         .arg("--rig")
         .arg(&rig)
@@ -111,4 +115,22 @@ fn demo_records_converts_and_loads_one_epoch() {
         "{loader}"
     );
     assert!(dir.path().join("demo/dataset/meta/info.json").is_file());
+    // Then a short ScaleDP-Ti run on that dataset, its checkpoint read back by one `predict`.
+    let trained = stdout
+        .lines()
+        .find(|l| l.starts_with("trained ScaleDP-Ti for 2 steps"))
+        .unwrap_or_else(|| panic!("no training summary in:\n{stdout}"));
+    let checkpoint = trained.rsplit("checkpoint ").next().unwrap();
+    assert!(
+        std::path::Path::new(checkpoint)
+            .join("config.json")
+            .is_file(),
+        "{trained}"
+    );
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.starts_with("predict: episode 0, ")),
+        "{stdout}"
+    );
 }
