@@ -249,10 +249,10 @@ pub fn cli_ok(out: &std::process::Output, what: &str) -> String {
 }
 
 /// One `scaledp eval --live` episode (validation split) of the run `run`, `seconds` long, from
-/// `cwd`: its report, checked to be a live one.
-pub fn live_episode(cwd: &Path, run: &str, seconds: &str) -> serde_json::Value {
+/// `cwd`, with `extra` arguments (controller options): its report, checked to be a live one.
+pub fn live_episode(cwd: &Path, run: &str, seconds: &str, extra: &[&str]) -> serde_json::Value {
     let report = cwd.join("live.json");
-    let args = [
+    let mut args = vec![
         "eval",
         run,
         "--live",
@@ -265,6 +265,7 @@ pub fn live_episode(cwd: &Path, run: &str, seconds: &str) -> serde_json::Value {
         "--report",
         report.to_str().unwrap_or("live.json"),
     ];
+    args.extend_from_slice(extra);
     let out = cli_ok(&run_scaledp(&args, cwd), "eval --live");
     let r = read_json(&report);
     assert_eq!(r["mode"], "live", "{out}\n{r}");

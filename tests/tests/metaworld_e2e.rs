@@ -119,7 +119,7 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
             >= 2
     );
     // The same checkpoint live: the simulator on its own /clock, serve following it.
-    let r = live_episode(root, "runs/metaworld/reach/ti", "0.5");
+    let r = live_episode(root, "runs/metaworld/reach/ti", "0.5", &[]);
     let ep = &r["episodes"][0];
     assert!(ep["duration_s"].as_f64().unwrap() >= 0.5, "{r}");
     assert!(ep["commanded_ticks"].as_u64().unwrap() >= 5, "{r}");
