@@ -109,6 +109,10 @@ fn t_offset(task: &scaledp_sim::TaskState, served_s: f64) -> f64 {
     (task.t_s - served_s).max(0.0)
 }
 
+/// How long a live simulator may answer nothing before its episode is given up (an ALOHA reset,
+/// the longest call, takes about a second).
+const STALL: Duration = Duration::from_secs(60);
+
 /// `eval --live` on a bridge rig (`metaworld/<task>`): the simulator live on the session with
 /// its `/clock` ([`scaledp_sim::bridge::live`]), stepping as fast as it renders (never ahead of
 /// real time), and a fresh [`Server`] per episode following that clock — inference on its own
@@ -135,7 +139,7 @@ pub fn run_bridge_live(
     lo.control_prefix = prefix;
     lo.clock_topic = format!("/scaledp_eval_{}/clock", std::process::id());
     let clock_topic = lo.clock_topic.clone();
-    let sim = LiveBridge::spawn(lo, session)?;
+    let mut sim = LiveBridge::spawn(lo, session)?;
     let mut policy = Some(first);
     let (mut p50s, mut p99s, mut e2e, mut rtfs) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut episodes = Vec::new();
@@ -165,6 +169,10 @@ pub fn run_bridge_live(
             let t = sim.task();
             if t.time_to_success_s.is_some() || t.done || t.t_s >= opts.max_seconds {
                 break t;
+            }
+            if let Err(e) = sim.check(STALL) {
+                let _ = server.stop();
+                return Err(e.into());
             }
         };
         let st = server.stop();

@@ -124,6 +124,7 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
     assert!(ep["duration_s"].as_f64().unwrap() >= 0.5, "{r}");
     assert!(ep["commanded_ticks"].as_u64().unwrap() >= 5, "{r}");
     assert!(r["real_time_factor"].as_f64().unwrap() > 0.05, "{r}");
+    simulator_dying_live_is_an_error(root);
     // A second run finds every result there and redoes nothing.
     let again = cli_ok(&run_scaledp(&args, root), "compare again");
     assert!(
@@ -161,4 +162,49 @@ fn a_metaworld_task_collects_converts_trains_and_scores_both_arms() {
         !table.contains('†'),
         "one bridge behaviour throughout: {table}"
     );
+}
+
+/// A simulator process that dies during a live episode (killed 6 s after it starts: MetaWorld's
+/// import takes ~2.6 s, the 60-s episode the rest) ends `eval --live` with the bridge's error,
+/// soon, where it used to wait for ever.
+fn simulator_dying_live_is_an_error(root: &std::path::Path) {
+    use std::os::unix::fs::PermissionsExt;
+    let python = scaledp_sim::bridge::python().unwrap();
+    let dying = root.join("dying-python");
+    std::fs::write(
+        &dying,
+        format!(
+            "#!/bin/sh\n( sleep 6; kill -9 $$ ) &\nexec '{}' \"$@\"\n",
+            python.display()
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(&dying, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let child = std::process::Command::new(scaledp_tests::scaledp_bin())
+        .args([
+            "eval",
+            "runs/metaworld/reach/ti",
+            "--live",
+            "--episodes",
+            "1",
+            "--split",
+            "val",
+            "--max-seconds",
+            "60",
+            "--report",
+            "dying.json",
+        ])
+        .env(scaledp_sim::bridge::PYTHON_ENV, &dying)
+        .current_dir(root)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out =
+        scaledp_tests::child::Reap::new(child).output_within(std::time::Duration::from_secs(50));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("metaworld/reach: "), "{stderr}");
+    assert!(!root.join("dying.json").exists(), "{stderr}");
 }

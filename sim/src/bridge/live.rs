@@ -90,6 +90,10 @@ pub struct LiveTask {
 
 struct Shared {
     stop: AtomicBool,
+    /// When the bridge started, and the loop's last round in ms after it: a hung simulator
+    /// process stops the rounds ([`LiveBridge::check`]).
+    born: Instant,
+    round_ms: AtomicU64,
     pending: Mutex<Vec<ArmCommand>>,
     /// Commands stamped before this (the current episode's start) are dropped.
     episode_start_ns: AtomicU64,
@@ -117,6 +121,8 @@ impl LiveBridge {
         let rig = opts.rig.clone();
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
+            born: Instant::now(),
+            round_ms: AtomicU64::new(0),
             pending: Mutex::new(vec![ArmCommand::default(); rig.arms.len()]),
             episode_start_ns: AtomicU64::new(0),
             reset: Mutex::new(None),
@@ -220,17 +226,43 @@ impl LiveBridge {
         lock(&self.shared.task).clone()
     }
 
+    /// An error once the loop has ended on its own (its simulator process failed: that error)
+    /// or has not come round for `stall` (a hung simulator); `Ok` while it runs. Whoever waits on
+    /// [`LiveBridge::task`] checks this too, or waits for ever on a dead simulator.
+    pub fn check(&mut self, stall: Duration) -> Result<()> {
+        if self.thread.as_ref().is_some_and(JoinHandle::is_finished) {
+            return Err(match self.thread.take().map(JoinHandle::join) {
+                Some(Ok(Err(e))) => e,
+                Some(Err(_)) => ended("its thread panicked"),
+                _ => ended("its loop ended"),
+            });
+        }
+        let round = Duration::from_millis(self.shared.round_ms.load(Ordering::Relaxed));
+        let quiet = self.shared.born.elapsed().saturating_sub(round);
+        if quiet > stall {
+            return Err(ended(&format!(
+                "the simulator has answered nothing for {:.0} s",
+                quiet.as_secs_f64()
+            )));
+        }
+        Ok(())
+    }
+
     /// Stops the loop (and the simulator) and reports how it ended.
     pub fn stop(mut self) -> Result<()> {
         self.shared.stop.store(true, Ordering::Relaxed);
         match self.thread.take().map(JoinHandle::join) {
             Some(Ok(r)) => r,
-            Some(Err(_)) => Err(Error::Bridge {
-                what: "the live bridge".into(),
-                reason: "its thread panicked".into(),
-            }),
+            Some(Err(_)) => Err(ended("its thread panicked")),
             None => Ok(()),
         }
+    }
+}
+
+fn ended(reason: &str) -> Error {
+    Error::Bridge {
+        what: "the live bridge".into(),
+        reason: reason.into(),
     }
 }
 
@@ -296,6 +328,9 @@ fn run(
     // The last full second's rate, once a second has passed.
     let mut rtf_full: Option<f64> = None;
     while !sh.stop.load(Ordering::Relaxed) {
+        let round = sh.born.elapsed().as_millis();
+        sh.round_ms
+            .store(u64::try_from(round).unwrap_or(u64::MAX), Ordering::Relaxed);
         if let Some(s) = lock(&sh.reset).take() {
             seed = s;
             sim_ns += dt;

@@ -191,7 +191,7 @@ fn bridge(
     o.control_prefix = args.sim_prefix.clone();
     o.seed = args.seed;
     o.expert = expert;
-    let sim = LiveBridge::spawn(o, session)?;
+    let mut sim = LiveBridge::spawn(o, session)?;
     eprintln!(
         "{} live on the simulation's /clock{} (Ctrl-C stops)",
         rig.name,
@@ -209,6 +209,8 @@ fn bridge(
             .is_none_or(|d| start.elapsed().as_secs_f64() < d)
     {
         std::thread::sleep(Duration::from_millis(50));
+        // A simulator that died or hung ends the command with its error, not silence.
+        sim.check(Duration::from_secs(60))?;
         let t = sim.task();
         let over = t.done || t.time_to_success_s.is_some_and(|s| t.t_s - s >= 0.2);
         if expert && over && t.seed == seed {
