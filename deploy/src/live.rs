@@ -145,7 +145,11 @@ pub fn run_bridge_live(
     let mut episodes = Vec::new();
     for i in 0..opts.episodes {
         let seed = opts.seed + i;
-        sim.reset(seed);
+        // The bridge starts on the first seed's episode: resetting it again cost a reset for
+        // nothing (ALOHA's plans the expert's 400 steps each time).
+        if i > 0 {
+            sim.reset(seed);
+        }
         // Wait for the new episode's first steps, so the server starts on its scene.
         let wait = Instant::now();
         while !(sim.task().seed == seed && sim.task().step < 4)
