@@ -181,13 +181,19 @@ fn recorded_episode_is_what_the_sim_published_and_ros2_tools_read_it() {
     assert!(path.ends_with("episode_000000.mcap"), "{}", path.display());
     let recorded = assert_contiguous(&run, &path);
     assert_eq!(recorded.len(), 4, "every topic recorded");
+    // Contiguous (above) means nothing the simulator published in between was lost; the
+    // episode must also span the recording's whole duration. The message count is not a
+    // check: the simulator's own rate sags on a loaded machine (1,612 joint states in 2 s
+    // against the rig's 1 kHz, every one recorded).
     for t in rig.topics() {
-        let n = recorded[&t.topic].len() as f64;
-        let expected = t.rate_hz * run.report.duration_s;
+        let msgs = &recorded[&t.topic];
+        let span_s = (msgs[msgs.len() - 1].2 - msgs[0].2) as f64 * 1e-9;
+        let d = run.report.duration_s;
         assert!(
-            (n - expected).abs() <= expected * 0.15 + 2.0,
-            "{}: {n} messages, expected ≈ {expected}",
-            t.topic
+            (span_s - d).abs() <= d * 0.15 + 2.0 / t.rate_hz,
+            "{}: {} messages over {span_s:.3} s of an episode of {d:.3} s",
+            t.topic,
+            msgs.len()
         );
         assert_eq!(run.report.dropped[&t.topic], 0);
     }
