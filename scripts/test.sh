@@ -122,11 +122,11 @@ step "cargo test"
 # why each test failed (stop 52's flake left only a name). So the first two failures' own
 # output, their backtraces left out, comes again last; target/test.log has everything.
 failed_output() {
+  # The failed tests' names (the first ten), then the first two's output: the tail is kept.
+  awk '/^---- .* (stdout|stderr) ----$/ { n++; if (n <= 10) print "failed: " $2 }
+       END { if (n > 10) print "(and " n - 10 " more)" }' "$1"
   awk '
-    /^---- .* (stdout|stderr) ----$/ {
-      n++; p = (n <= 2); lines = 0; skip = 0
-      if (!p) { print "(also failed: " $2 ")"; next }
-    }
+    /^---- .* (stdout|stderr) ----$/ { n++; p = (n <= 2); lines = 0; skip = 0 }
     /^failures:$/ { p = 0 }
     /^stack backtrace:$/ { skip = 1; next }
     /^note: Some details are omitted/ { skip = 0; next }
