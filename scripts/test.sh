@@ -19,7 +19,7 @@ report() {
   local rc=$?
   # A failed step leaves no venv or cargo-machete install behind it.
   local pid
-  for pid in "${venvs_pid:-}" "${machete_pid:-}"; do
+  for pid in "${venvs_pid:-}" "${machete_pid:-}" "${cargo_pid:-}" "${tail_pid:-}"; do
     if [ -n "$pid" ] && kill -0 "$pid" 2>/dev/null; then
       pkill -P "$pid" 2>/dev/null || true
       kill "$pid" 2>/dev/null || true
@@ -114,23 +114,39 @@ machete_pid=$!
 unset PYTHONDONTWRITEBYTECODE
 export PYTHONPYCACHEPREFIX="$PWD/target/pycache"
 # --no-fail-fast: every test executable runs, so one failure does not hide the others'.
+# The output goes to target/test.log and is followed from there: a pipe into tee would wait
+# for every process holding its end, and a test's leaked descendant could hold it for ever.
 test_rc=0
-cargo test --release --workspace --locked --no-fail-fast 2>&1 | tee target/test.log ||
-  test_rc=${PIPESTATUS[0]}
+cargo test --release --workspace --locked --no-fail-fast > target/test.log 2>&1 &
+cargo_pid=$!
+tail -n +1 -f --pid="$cargo_pid" target/test.log &
+tail_pid=$!
+wait "$cargo_pid" || test_rc=$?
+wait "$tail_pid" || true
 step "cargo test"
 # A CI log keeps the start and the end of the output and cuts the middle, where cargo lists
-# why each test failed (stop 52's flake left only a name). So the first two failures' own
-# output, their backtraces left out, comes again last; target/test.log has everything.
+# why each test failed (stop 52's flake left only a name). So the failed tests' names and the
+# first one's own output come again last: its first 4 lines (the panic) and its last 20 (a
+# failed command's error), backtraces left out.
 failed_output() {
-  # The failed tests' names (the first ten), then the first two's output: the tail is kept.
-  awk '/^---- .* (stdout|stderr) ----$/ { n++; if (n <= 10) print "failed: " $2 }
-       END { if (n > 10) print "(and " n - 10 " more)" }' "$1"
   awk '
-    /^---- .* (stdout|stderr) ----$/ { n++; p = (n <= 2); lines = 0; skip = 0 }
-    /^failures:$/ { p = 0 }
+    /^---- .* (stdout|stderr) ----$/ {
+      n++; keep = (n == 1); skip = 0
+      name = $0; sub(/^---- /, "", name); sub(/ (stdout|stderr) ----$/, "", name)
+      if (n <= 10) names = names "failed: " name "\n"
+    }
+    /^failures:$/ { keep = 0 }
     /^stack backtrace:$/ { skip = 1; next }
     /^note: Some details are omitted/ { skip = 0; next }
-    p && !skip && lines++ < 25 { print substr($0, 1, 400) }
+    keep && !skip { buf[++held] = substr($0, 1, 400) }
+    END {
+      printf "%s", names
+      if (n > 10) print "(and " n - 10 " more)"
+      for (i = 1; i <= held && i <= 4; i++) print buf[i]
+      from = held - 19 > 5 ? held - 19 : 5
+      if (from > 5) print "  [" from - 5 " lines left out: target/test.log]"
+      for (i = from; i <= held; i++) print buf[i]
+    }
   ' "$1"
 }
 if [ "$test_rc" -ne 0 ]; then

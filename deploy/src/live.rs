@@ -109,10 +109,6 @@ fn t_offset(task: &scaledp_sim::TaskState, served_s: f64) -> f64 {
     (task.t_s - served_s).max(0.0)
 }
 
-/// How long a live simulator may answer nothing before its episode is given up (an ALOHA reset,
-/// the longest call, takes about a second).
-const STALL: Duration = Duration::from_secs(60);
-
 /// `eval --live` on a bridge rig (`metaworld/<task>`): the simulator live on the session with
 /// its `/clock` ([`scaledp_sim::bridge::live`]), stepping as fast as it renders (never ahead of
 /// real time), and a fresh [`Server`] per episode following that clock — inference on its own
@@ -127,7 +123,7 @@ pub fn run_bridge_live(
     session: &zenoh::Session,
     on_episode: &mut dyn FnMut(&EpisodeReport),
 ) -> Result<EvalReport> {
-    use scaledp_sim::bridge::live::{LiveBridge, LiveOptions};
+    use scaledp_sim::bridge::live::{LiveBridge, LiveOptions, STALL};
     let started = Instant::now();
     let first = Policy::load(checkpoint, device)?;
     let ckpt = first.dir().display().to_string();
@@ -150,9 +146,11 @@ pub fn run_bridge_live(
         if i > 0 {
             sim.reset(seed);
         }
-        // Wait for the new episode's first steps, so the server starts on its scene.
+        // Wait for the new episode's first steps, so the server starts on its scene (the first
+        // one is there from the start: its step may be past 4 already).
         let wait = Instant::now();
-        while !(sim.task().seed == seed && sim.task().step < 4)
+        while i > 0
+            && !(sim.task().seed == seed && sim.task().step < 4)
             && wait.elapsed() < Duration::from_secs(10)
         {
             std::thread::sleep(Duration::from_millis(5));

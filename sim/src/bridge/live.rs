@@ -105,9 +105,14 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
+/// How long a live simulator may answer nothing before it is taken for hung (an ALOHA reset,
+/// its longest call, plans the expert's 400 steps).
+pub const STALL: Duration = Duration::from_secs(60);
+
 /// A running live bridge.
 pub struct LiveBridge {
     hello: super::Hello,
+    killer: super::Killer,
     shared: Arc<Shared>,
     thread: Option<JoinHandle<Result<()>>>,
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
@@ -118,6 +123,7 @@ impl LiveBridge {
     pub fn spawn(opts: LiveOptions, session: &zenoh::Session) -> Result<Self> {
         let bridge = Bridge::spawn(&opts.rig)?;
         let hello = bridge.hello().clone();
+        let killer = bridge.killer();
         let rig = opts.rig.clone();
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
@@ -205,6 +211,7 @@ impl LiveBridge {
             })?;
         Ok(LiveBridge {
             hello,
+            killer,
             shared,
             thread: Some(thread),
             _subscribers: subscribers,
@@ -227,8 +234,9 @@ impl LiveBridge {
     }
 
     /// An error once the loop has ended on its own (its simulator process failed: that error)
-    /// or has not come round for `stall` (a hung simulator); `Ok` while it runs. Whoever waits on
-    /// [`LiveBridge::task`] checks this too, or waits for ever on a dead simulator.
+    /// or has not come round for `stall` (a hung simulator, which is then killed); `Ok` while it
+    /// runs. Whoever waits on [`LiveBridge::task`] checks this too, or waits for ever on a dead
+    /// simulator. [`STALL`] is the limit `eval --live` and `scaledp sim` use.
     pub fn check(&mut self, stall: Duration) -> Result<()> {
         if self.thread.as_ref().is_some_and(JoinHandle::is_finished) {
             return Err(match self.thread.take().map(JoinHandle::join) {
@@ -237,13 +245,22 @@ impl LiveBridge {
                 _ => ended("its loop ended"),
             });
         }
-        let round = Duration::from_millis(self.shared.round_ms.load(Ordering::Relaxed));
-        let quiet = self.shared.born.elapsed().saturating_sub(round);
-        if quiet > stall {
-            return Err(ended(&format!(
-                "the simulator has answered nothing for {:.0} s",
-                quiet.as_secs_f64()
-            )));
+        let quiet = || {
+            let round = Duration::from_millis(self.shared.round_ms.load(Ordering::Relaxed));
+            self.shared.born.elapsed().saturating_sub(round)
+        };
+        // Looked at twice: a process stopped (SIGSTOP) past `stall` resumes with its loop a
+        // round behind, which one look would take for a hang.
+        if quiet() > stall {
+            std::thread::sleep(Duration::from_millis(300));
+            let q = quiet();
+            if q > stall {
+                self.killer.kill();
+                return Err(ended(&format!(
+                    "the simulator answered nothing for {:.0} s, and was killed",
+                    q.as_secs_f64()
+                )));
+            }
         }
         Ok(())
     }

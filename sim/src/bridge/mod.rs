@@ -140,7 +140,8 @@ pub struct Observation {
 pub struct Bridge {
     name: String,
     hello: Hello,
-    child: Child,
+    /// Shared with [`Killer`]s: a call blocked on a hung simulator's stdout holds no lock.
+    child: Arc<Mutex<Child>>,
     stdin: ChildStdin,
     stdout: BufReader<ChildStdout>,
     stderr: Arc<Mutex<Vec<String>>>,
@@ -275,7 +276,7 @@ impl Bridge {
                 stages: Vec::new(),
                 cameras: Vec::new(),
             },
-            child,
+            child: Arc::new(Mutex::new(child)),
             stdin,
             stdout: BufReader::new(stdout),
             stderr: tail,
@@ -316,6 +317,11 @@ impl Bridge {
         &self.hello
     }
 
+    /// A handle that kills this simulator process from another thread.
+    pub fn killer(&self) -> Killer {
+        Killer(self.child.clone())
+    }
+
     /// One step of simulated time (ns).
     pub fn step_ns(&self) -> u64 {
         (self.hello.step_s * 1e9).round() as u64
@@ -334,7 +340,7 @@ impl Bridge {
     fn call(&mut self, req: &Value, what: &str) -> Result<(Value, Vec<u8>)> {
         let ctx = format!("{}: {what}", self.name);
         let died = |b: &mut Bridge, e: String| {
-            let status = b.child.try_wait().ok().flatten();
+            let status = lock_child(&b.child).try_wait().ok().flatten();
             let tail = b.stderr_tail();
             Error::Bridge {
                 what: ctx.clone(),
@@ -453,18 +459,35 @@ impl Bridge {
     }
 }
 
+/// Kills a bridge's simulator process from another thread: the way out of a call blocked on a
+/// simulator that hangs (the call then fails, as on any simulator that exits).
+#[derive(Clone)]
+pub struct Killer(Arc<Mutex<Child>>);
+
+impl Killer {
+    /// Kills the process (nothing if it has exited).
+    pub fn kill(&self) {
+        let _ = lock_child(&self.0).kill();
+    }
+}
+
+fn lock_child(c: &Mutex<Child>) -> std::sync::MutexGuard<'_, Child> {
+    c.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 impl Drop for Bridge {
     fn drop(&mut self) {
         let _ = self.stdin.write_all(b"{\"op\": \"close\"}\n");
         let _ = self.stdin.flush();
         // A bridge that does not close within a second is killed.
         for _ in 0..20 {
-            if matches!(self.child.try_wait(), Ok(Some(_))) {
+            if matches!(lock_child(&self.child).try_wait(), Ok(Some(_))) {
                 return;
             }
             std::thread::sleep(std::time::Duration::from_millis(50));
         }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        let mut child = lock_child(&self.child);
+        let _ = child.kill();
+        let _ = child.wait();
     }
 }

@@ -184,7 +184,7 @@ fn bridge(
     session: &zenoh::Session,
     stop: &AtomicBool,
 ) -> Result<ExitStatus> {
-    use scaledp_sim::bridge::live::{LiveBridge, LiveOptions};
+    use scaledp_sim::bridge::live::{LiveBridge, LiveOptions, STALL};
     let mut o = LiveOptions::new(rig.clone());
     o.keys = keys;
     o.namespace = args.namespace.clone();
@@ -210,7 +210,7 @@ fn bridge(
     {
         std::thread::sleep(Duration::from_millis(50));
         // A simulator that died or hung ends the command with its error, not silence.
-        sim.check(Duration::from_secs(60))?;
+        sim.check(STALL)?;
         let t = sim.task();
         let over = t.done || t.time_to_success_s.is_some_and(|s| t.t_s - s >= 0.2);
         if expert && over && t.seed == seed {
