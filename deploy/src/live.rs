@@ -141,19 +141,17 @@ pub fn run_bridge_live(
     let mut episodes = Vec::new();
     for i in 0..opts.episodes {
         let seed = opts.seed + i;
-        // The bridge starts on the first seed's episode: resetting it again cost a reset for
-        // nothing (ALOHA's plans the expert's 400 steps each time).
+        // The bridge starts on the first seed's episode (resetting it again cost a reset for
+        // nothing: ALOHA's plans the expert's 400 steps). From the second on, reset it and wait
+        // for the new episode's first steps, so the server starts on its scene.
         if i > 0 {
             sim.reset(seed);
-        }
-        // Wait for the new episode's first steps, so the server starts on its scene (the first
-        // one is there from the start: its step may be past 4 already).
-        let wait = Instant::now();
-        while i > 0
-            && !(sim.task().seed == seed && sim.task().step < 4)
-            && wait.elapsed() < Duration::from_secs(10)
-        {
-            std::thread::sleep(Duration::from_millis(5));
+            let wait = Instant::now();
+            while !(sim.task().seed == seed && sim.task().step < 4)
+                && wait.elapsed() < Duration::from_secs(10)
+            {
+                std::thread::sleep(Duration::from_millis(5));
+            }
         }
         let p = match policy.take() {
             Some(p) => p,

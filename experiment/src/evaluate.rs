@@ -104,12 +104,7 @@ pub fn checkpoint(
     let mut on = |_: &EpisodeReport| b.inc(1);
     let report = match kind {
         Kind::Live => {
-            let port = std::net::TcpListener::bind("127.0.0.1:0")?
-                .local_addr()?
-                .port();
-            let config =
-                scaledp_recorder::net::zenoh_config(None, &[], &[format!("tcp/127.0.0.1:{port}")])?;
-            let session = scaledp_recorder::net::open(config)?;
+            let session = scaledp_recorder::net::open_private()?;
             scaledp_deploy::run_live(policy.dir(), &Device::Cpu, &rig, &opts, &session, &mut on)?
         }
         _ => run_eval(&policy, &rig, &opts, &mut on)?,

@@ -7,6 +7,16 @@ use crate::error::{Error, Result};
 /// The endpoint zenoh-bridge-ros2dds (and `scaledp sim`) listens on by default.
 pub const DEFAULT_ENDPOINT: &str = "tcp/127.0.0.1:7447";
 
+/// The endpoint of a session only its own process uses: loopback, on a port the OS picks when
+/// Zenoh binds it (a port probed free beforehand can be taken by another process in between).
+pub const PRIVATE_ENDPOINT: &str = "tcp/127.0.0.1:0";
+
+/// Opens a session only this process uses (a simulator, a server and a recorder sharing it):
+/// it listens on [`PRIVATE_ENDPOINT`] and connects nowhere.
+pub fn open_private() -> Result<zenoh::Session> {
+    open(zenoh_config(None, &[], &[PRIVATE_ENDPOINT.to_string()])?)
+}
+
 /// Builds a Zenoh config: from a standard Zenoh config file when given (endpoints, TLS, …),
 /// else peer mode on loopback with multicast scouting off. `connect` / `listen` endpoints
 /// override the file's; with neither a file nor endpoints, a peer connects to

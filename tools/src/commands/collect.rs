@@ -39,9 +39,8 @@ pub fn run(args: CollectArgs) -> Result<ExitStatus> {
         );
     }
     let task = args.task.clone().unwrap_or_else(|| default_task(&rig));
-    // By default the session only listens on a loopback port the OS picks (port 0; a port
-    // probed free first can be taken before Zenoh binds it): nothing else joins it.
-    let listen = ["tcp/127.0.0.1:0".to_string()];
+    // By default a session only this process uses: nothing else joins it.
+    let listen = [scaledp_recorder::net::PRIVATE_ENDPOINT.to_string()];
     let config = shared::zenoh_config(&args.net, &listen)?;
     let recorder = RecorderOptions::new(rig.clone(), &args.out)
         .task(&task)

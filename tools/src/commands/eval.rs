@@ -146,11 +146,7 @@ pub fn run(a: EvalArgs) -> Result<ExitStatus> {
     }
     let report = with_progress(a.episodes, |on_episode| {
         Ok(if a.live {
-            // Only this process joins: a session listening on a loopback port the OS picks
-            // (port 0: a port probed free first can be taken before Zenoh binds it).
-            let config =
-                scaledp_recorder::net::zenoh_config(None, &[], &["tcp/127.0.0.1:0".to_string()])?;
-            let session = scaledp_recorder::net::open(config)?;
+            let session = scaledp_recorder::net::open_private()?;
             let dev = shared::device(&a.control.device)?;
             scaledp_deploy::run_live(policy.dir(), &dev, &rig, &opts, &session, on_episode)?
         } else {
