@@ -30,7 +30,8 @@ fn cpu_sim(o: TrainOptions) -> TrainOptions {
         .lr(3e-4)
         .warmup_steps(500)
         // The pilot (same settings, a 4,000-step schedule) passed 19 of 20 validation seeds at
-        // step 2,000; 3,000 steps end the cosine schedule about an hour in on two cores.
+        // step 2,000; 3,000 steps end the cosine schedule in about an hour on two cores
+        // non-causal, 1.6 h causal (the default; docs/results/historical/cpu-sim/).
         .steps(3000)
         .checkpoint_every(500)
         // Every demonstration trains; checkpoints are chosen on validation seeds in closed loop.
