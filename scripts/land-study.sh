@@ -14,8 +14,7 @@ bin=${1:?usage: scripts/land-study.sh PATH-TO-SCALEDP-BINARY}
 
 for dir in docs/results/*/; do
   name=$(basename "$dir")
-  { [ "$name" = historical ] || [ "$name" = logs ]; } && continue
-  ls "$dir"/*--*.json >/dev/null 2>&1 || continue
+  ls "$dir"/*--*.json >/dev/null 2>&1 || continue # a benchmark holds <task>--<arm>.json; historical/ and logs/ do not
   echo "== experiment report --name $name"
   "$bin" experiment report --name "$name" --readme README.md
 done
