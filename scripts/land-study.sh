@@ -18,9 +18,16 @@ for dir in docs/results/*/; do
   echo "== experiment report --name $name"
   "$bin" experiment report --name "$name" --readme README.md
 done
+# The machine's log goes on from the committed one; a new machine starts its log from that copy
+# (`cp docs/results/logs/pauses.log runs/logs/`), or this copy would drop the earlier entries.
+committed=docs/results/logs/pauses.log
 if [ -f runs/logs/pauses.log ]; then
+  if [ -f "$committed" ] && ! head -c "$(stat -c %s "$committed")" runs/logs/pauses.log | cmp -s - "$committed"; then
+    echo "runs/logs/pauses.log does not go on from $committed (a new machine?): start it from the committed copy" >&2
+    exit 1
+  fi
   mkdir -p docs/results/logs
-  cp runs/logs/pauses.log docs/results/logs/pauses.log
+  cp runs/logs/pauses.log "$committed"
 fi
 # The workspace's lint wrapper, as scripts/test.sh builds: the same build units, so no rebuild
 # of the dependencies.
