@@ -6,8 +6,8 @@
 #   bash scripts/aloha-study.sh runs/bin/scaledp-<rev>    # e.g. nohup … > runs/logs/study.log &
 #
 # The binary must be built from a clean commit (`compare` refuses to write under docs/results/
-# otherwise; `bash scripts/build-study.sh 0e049df` builds it) and is named by that commit, so every result file names the revision that trained
-# and scored it. Each step resumes from its checkpoints and skips an arm whose result has landed,
+# otherwise; `bash scripts/build-study.sh 0e049df` builds it) and is named by that commit, so
+# every result file names the revision that trained and scored it. Each step resumes from its checkpoints and skips an arm whose result has landed,
 # so the script is restarted as is after an interruption (a session ending, a reboot); a failed
 # step is logged and does not stop the ones after it. About 1 h per 2,500-step run and 3 h per
 # 7,500-step run on the 2-core machine.
